@@ -1,0 +1,36 @@
+# The README's two commands: `make train` and `make test`. Both create .venv if missing.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+# Ray on a small machine: no dashboard, no memory monitor kills mid-test.
+export RAY_memory_monitor_refresh_ms := 0
+export RAY_DISABLE_DOCKER_CPU_WARNING := 1
+export MUJOCO_GL ?= egl
+
+.PHONY: install train test lint bench clean
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip setuptools wheel
+	# torch pinned to the CPU build (a local wheel here); never an open `torch` requirement.
+	$(PY) -m pip install -q "torch==2.13.0"
+	$(PY) -m pip install -q -e ".[test]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+train: $(STAMP)
+	$(VENV)/bin/rllib train file tuned_examples/race/ppo-asor.yaml --test
+
+test: $(STAMP)
+	$(PY) -m pytest -q --timeout=900
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks
+
+bench: $(STAMP)
+	$(PY) -m benchmarks.run_all
+
+clean:
+	rm -rf $(VENV) *.egg-info

@@ -1,0 +1,200 @@
+"""`AsorConfig`: every ASOR hyperparameter in one typed, validated place.
+
+The same names are used in Python (`with_asor(config, lambda_=0.01)`), in the YAML `asor:`
+block and in the metrics (`asor/lambda`). A bad value raises a `ValueError` that names the key,
+the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+MODES = ("asor", "srpo", "count", "random")
+PROXIES = ("rnd", "ensemble")
+REWARD_FORMS = ("log", "centered", "gail")
+ALGORITHMS = ("PPO", "APPO", "IMPALA", "SAC", "CQL")
+
+LambdaSpec = float | str | list[list[float]]
+
+
+def _fail(key: str, value: Any, allowed: str) -> None:
+    raise ValueError(f"asor.{key}={value!r} is invalid: allowed {allowed}")
+
+
+@dataclass
+class AsorConfig:
+    """Hyperparameters of ASOR (see ALGORITHM.md); defaults chosen by measurement (docs/results.md)."""
+
+    lambda_: LambdaSpec = 0.01
+    """λ, weight of log ω(s) in the reward: a float ≥ 0, a piecewise-linear schedule
+    `[[timestep, value], ...]` (like RLlib's lr schedules), or "auto" (dual ascent on the
+    discriminator's Jensen-Shannon estimate; our extension, not in the paper)."""
+    rho_value: float = 0.5
+    """ρ1 ∈ (0, 1]: fraction of the batch with the highest V(s) that forms P."""
+    rho_count: float = 0.5
+    """ρ2 ∈ (0, 1]: fraction of P with the highest visitation proxy that forms D_P ("real")."""
+    mode: str = "asor"
+    """Partition: asor (value then count), srpo (value only), count (count only), random."""
+    proxy: str = "rnd"
+    """Visitation-count proxy: rnd (Random Network Distillation) or ensemble (disagreement)."""
+    reward_form: str = "log"
+    """log: λ·log ω (paper); centered: log ω minus its batch mean; gail: −log(1 − ω) ≥ 0."""
+    log_omega_min: float = -5.0
+    """Lower clip of log ω (and of the gail bonus's sign-flipped counterpart), < 0."""
+    disc_hiddens: list[int] = field(default_factory=lambda: [256, 256, 256])
+    """Discriminator MLP hidden sizes (SRPO: 3×256 ReLU)."""
+    disc_lr: float = 1e-3
+    """Adam learning rate of the discriminator."""
+    label_smoothing: float = 0.0
+    """Targets 1−ε / ε for real / generated; > 0 keeps ω from saturating (LAVA_STUDY.md)."""
+    rnd_hiddens: list[int] = field(default_factory=lambda: [128, 128])
+    """RND target/predictor MLP hidden sizes."""
+    rnd_embedding_dim: int = 64
+    """RND output dimension."""
+    rnd_lr: float = 1e-3
+    """Adam learning rate of the RND predictor (or the dynamics ensemble)."""
+    ensemble_size: int = 5
+    """K, the number of dynamics models when proxy == "ensemble"."""
+    lambda_target: float = 0.1
+    """ε of the constraint d(dπ, d*) < ε, used only by lambda_ == "auto"."""
+    lambda_lr: float = 0.01
+    """η_λ, the dual-ascent step of lambda_ == "auto"."""
+    lambda_max: float = 1.0
+    """Upper bound of λ for lambda_ == "auto"."""
+    lambda_init: float = 0.0
+    """Starting λ for lambda_ == "auto"."""
+    obs_keys: list[str] | None = None
+    """For Dict observations: the keys the discriminator and proxy see (None = all, flattened)."""
+    seed: int | None = None
+    """Seed for the random partition mode and the aux networks' initialisation."""
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    # ------------------------------------------------------------------ validation
+    def validate(self) -> None:
+        """Raise ValueError naming the first bad key, its value and what is allowed."""
+        self._validate_lambda()
+        for key in ("rho_value", "rho_count"):
+            v = getattr(self, key)
+            if not _is_number(v) or not 0.0 < v <= 1.0:
+                _fail(key, v, "a number in (0, 1]")
+        for key, allowed in (("mode", MODES), ("proxy", PROXIES), ("reward_form", REWARD_FORMS)):
+            if getattr(self, key) not in allowed:
+                _fail(key, getattr(self, key), " | ".join(allowed))
+        if not _is_number(self.log_omega_min) or not -1e6 < self.log_omega_min < 0:
+            _fail("log_omega_min", self.log_omega_min, "a finite number < 0")
+        for key in ("disc_lr", "rnd_lr", "lambda_lr"):
+            v = getattr(self, key)
+            if not _is_number(v) or v <= 0:
+                _fail(key, v, "a number > 0")
+        if not _is_number(self.label_smoothing) or not 0.0 <= self.label_smoothing < 0.5:
+            _fail("label_smoothing", self.label_smoothing, "a number in [0, 0.5)")
+        for key in ("disc_hiddens", "rnd_hiddens"):
+            v = getattr(self, key)
+            if not isinstance(v, Sequence) or isinstance(v, str) or not v or not all(
+                isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in v
+            ):
+                _fail(key, v, "a non-empty list of positive integers")
+            setattr(self, key, list(v))
+        for key in ("rnd_embedding_dim", "ensemble_size"):
+            v = getattr(self, key)
+            if not isinstance(v, int) or isinstance(v, bool) or v < (2 if key == "ensemble_size" else 1):
+                _fail(key, v, "an integer ≥ 2" if key == "ensemble_size" else "an integer ≥ 1")
+        for key in ("lambda_target", "lambda_max", "lambda_init"):
+            v = getattr(self, key)
+            if not _is_number(v) or v < 0:
+                _fail(key, v, "a finite number ≥ 0")
+        if self.obs_keys is not None and (
+            isinstance(self.obs_keys, str)
+            or not isinstance(self.obs_keys, Sequence)
+            or not self.obs_keys
+            or not all(isinstance(k, str) for k in self.obs_keys)
+        ):
+            _fail("obs_keys", self.obs_keys, "null or a non-empty list of observation keys")
+        if self.seed is not None and (not isinstance(self.seed, int) or isinstance(self.seed, bool)):
+            _fail("seed", self.seed, "null or an integer")
+
+    def _validate_lambda(self) -> None:
+        lam = self.lambda_
+        if isinstance(lam, str):
+            if lam != "auto":
+                _fail("lambda_", lam, 'a number ≥ 0, "auto", or [[timestep, value], ...]')
+            return
+        if _is_number(lam):
+            if lam < 0:
+                _fail("lambda_", lam, 'a number ≥ 0, "auto", or [[timestep, value], ...]')
+            self.lambda_ = float(lam)
+            return
+        ok = isinstance(lam, Sequence) and len(lam) > 0
+        points: list[list[float]] = []
+        if ok:
+            for p in lam:
+                if (
+                    not isinstance(p, Sequence)
+                    or len(p) != 2
+                    or not all(_is_number(x) for x in p)
+                    or p[0] < 0
+                    or p[1] < 0
+                ):
+                    ok = False
+                    break
+                points.append([float(p[0]), float(p[1])])
+        if ok and any(b[0] <= a[0] for a, b in zip(points, points[1:], strict=False)):
+            ok = False
+        if not ok:
+            _fail(
+                "lambda_",
+                lam,
+                'a number ≥ 0, "auto", or a schedule [[timestep, value], ...] with increasing '
+                "timesteps ≥ 0 and values ≥ 0",
+            )
+        self.lambda_ = points
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_dict(cls, settings: Mapping[str, Any] | None) -> AsorConfig:
+        """Build from a plain dict (YAML `asor:` block); unknown keys raise ValueError.
+
+        `lambda` is accepted as an alias of `lambda_` (YAML users write it naturally).
+        """
+        settings = dict(settings or {})
+        if "lambda" in settings:
+            if "lambda_" in settings:
+                raise ValueError("asor: give either 'lambda' or 'lambda_', not both")
+            settings["lambda_"] = settings.pop("lambda")
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(settings) - known)
+        if unknown:
+            raise ValueError(
+                f"asor: unknown key(s) {', '.join(map(repr, unknown))}; allowed: "
+                + ", ".join(sorted(known))
+            )
+        return cls(**settings)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-dict form (what is stored in `learner_config_dict['asor']`)."""
+        return dataclasses.asdict(self)
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def effective_rhos(self) -> tuple[float, float]:
+        """(ρ1, ρ2) as the partition uses them for this mode (srpo: ρ2 = 1, count: ρ1 = 1)."""
+        if self.mode == "srpo":
+            return self.rho_value, 1.0
+        if self.mode == "count":
+            return 1.0, self.rho_count
+        return self.rho_value, self.rho_count
+
+    @property
+    def needs_proxy(self) -> bool:
+        """Whether the visitation-count proxy (RND/ensemble) is trained and used."""
+        return self.mode in ("asor", "count")
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)

@@ -1,0 +1,1 @@
+"""RLModules for our observation spaces (the race network)."""

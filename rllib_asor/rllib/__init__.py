@@ -1,0 +1,1 @@
+"""Glue between the ASOR core and RLlib 2.60 (new API stack)."""
