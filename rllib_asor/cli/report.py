@@ -401,7 +401,8 @@ def _jsonable(obj: Any) -> Any:
 def _curve(trial: Trial, metric: str, x: str) -> tuple[np.ndarray, np.ndarray]:
     xs, ys = trial.series(x), trial.series(metric)
     ok = np.isfinite(xs) & np.isfinite(ys)
-    return xs[ok], ys[ok]
+    order = np.argsort(xs[ok], kind="stable")  # np.interp needs increasing x
+    return xs[ok][order], ys[ok][order]
 
 
 def plot_env(report: Report, env: str, path: Path) -> None:
@@ -440,7 +441,8 @@ def plot_env(report: Report, env: str, path: Path) -> None:
             keep = count > 0
             with warnings.catch_warnings():  # all-NaN grid columns are dropped by `keep`
                 warnings.simplefilter("ignore", RuntimeWarning)
-                mean, std = np.nanmean(ys, axis=0), np.nanstd(ys, axis=0)
+                mean = np.nanmean(ys, axis=0)
+                std = np.nan_to_num(np.nanstd(ys, axis=0, ddof=1))  # sample std, as in the table
             label = f"{g.method} (n={g.n})"
             if keep.sum() == 1:
                 ax.errorbar(grid[keep], mean[keep], yerr=std[keep], fmt="o", label=label, capsize=3)

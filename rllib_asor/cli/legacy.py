@@ -1,0 +1,155 @@
+"""Translation of old RLlib config/stop keys to the new API stack, with a warning each."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rllib_asor.cli.errors import UsageError
+
+# Old config key -> new config key (same value).
+RENAMED_CONFIG_KEYS: dict[str, str] = {
+    "num_workers": "num_env_runners",
+    "num_envs_per_worker": "num_envs_per_env_runner",
+    "num_cpus_per_worker": "num_cpus_per_env_runner",
+    "num_gpus_per_worker": "num_gpus_per_env_runner",
+    "custom_resources_per_worker": "custom_resources_per_env_runner",
+    "num_cpus_for_driver": "num_cpus_for_main_process",
+    "num_sgd_iter": "num_epochs",
+    "sgd_minibatch_size": "minibatch_size",
+    "evaluation_num_workers": "evaluation_num_env_runners",
+    "recreate_failed_workers": "restart_failed_env_runners",
+    "ignore_worker_failures": "ignore_env_runner_failures",
+    "metrics_smoothing_episodes": "metrics_num_episodes_for_smoothing",
+    "min_iter_time_s": "min_time_s_per_iteration",
+    "timesteps_per_iteration": "min_sample_timesteps_per_iteration",
+    "learning_starts": "num_steps_sampled_before_learning_starts",
+}
+
+# Old top-level config keys that now live in `model_config` (config.rl_module(model_config=...)).
+MODEL_CONFIG_TOPLEVEL_KEYS = ("vf_share_layers",)
+
+# Old result names -> new result names (for `stop`).
+RENAMED_STOP_KEYS: dict[str, str] = {
+    "episode_reward_mean": "env_runners/episode_return_mean",
+    "episode_reward_max": "env_runners/episode_return_max",
+    "episode_reward_min": "env_runners/episode_return_min",
+    "episode_len_mean": "env_runners/episode_len_mean",
+    "sampler_results/episode_reward_mean": "env_runners/episode_return_mean",
+    "env_runners/episode_reward_mean": "env_runners/episode_return_mean",
+    "evaluation/episode_reward_mean": "evaluation/env_runners/episode_return_mean",
+    "evaluation/sampler_results/episode_reward_mean": "evaluation/env_runners/episode_return_mean",
+    "timesteps_total": "num_env_steps_sampled_lifetime",
+    "agent_timesteps_total": "num_agent_steps_sampled_lifetime",
+    "num_env_steps_sampled": "num_env_steps_sampled_lifetime",
+    "num_agent_steps_sampled": "num_agent_steps_sampled_lifetime",
+}
+
+# Old experiment-level keys -> where they go now.
+RENAMED_SPEC_KEYS: dict[str, tuple[str, str]] = {
+    "checkpoint_freq": ("checkpoint_config", "checkpoint_frequency"),
+    "checkpoint_at_end": ("checkpoint_config", "checkpoint_at_end"),
+    "keep_checkpoints_num": ("checkpoint_config", "num_to_keep"),
+    "checkpoint_score_attr": ("checkpoint_config", "checkpoint_score_attribute"),
+    "local_dir": ("", "storage_path"),
+}
+
+OBSERVATION_FILTERS = ("NoFilter", "MeanStdFilter")
+
+
+def mean_std_filter_connector(env: Any = None, spaces: Any = None, device: Any = None) -> Any:
+    """env_to_module connector factory replacing `observation_filter: MeanStdFilter`."""
+    from ray.rllib.connectors.env_to_module import MeanStdFilter
+
+    return MeanStdFilter()
+
+
+def translate_config(config: dict[str, Any], source: str) -> tuple[dict[str, Any], list[str]]:
+    """Return (new-stack config dict, warnings); raise UsageError for unsupported legacy values.
+
+    `model: {...}` becomes `model_config: {...}`, `framework: tf` is refused (torch only),
+    `observation_filter: MeanStdFilter` becomes a MeanStdFilter env-to-module connector.
+    """
+    out: dict[str, Any] = {}
+    warnings: list[str] = []
+    model_config: dict[str, Any] = dict(config.get("model_config") or {})
+    for key, value in config.items():
+        if key == "model_config":
+            continue
+        if key in RENAMED_CONFIG_KEYS:
+            new = RENAMED_CONFIG_KEYS[key]
+            warnings.append(f"{source}: legacy key '{key}' translated to '{new}'")
+            out[new] = value
+        elif key == "model":
+            if not isinstance(value, dict):
+                raise UsageError(
+                    f"must be a mapping of model settings, got {value!r}", source=source, key="model"
+                )
+            if value:
+                for sub, sub_value in value.items():
+                    _check_model_key(sub, source, f"model.{sub}")
+                    model_config.setdefault(sub, sub_value)
+                warnings.append(
+                    f"{source}: legacy key 'model' ({', '.join(sorted(value))}) translated to "
+                    "'model_config' (config.rl_module(model_config=...))"
+                )
+        elif key in MODEL_CONFIG_TOPLEVEL_KEYS:
+            model_config.setdefault(key, value)
+            warnings.append(f"{source}: legacy key '{key}' translated to 'model_config.{key}'")
+        elif key == "framework":
+            if value not in ("torch", None):
+                raise UsageError(
+                    f"framework {value!r} is not supported: allowed 'torch' (rllib-asor runs the "
+                    "new API stack with torch only)",
+                    source=source,
+                    key="framework",
+                )
+            warnings.append(f"{source}: key 'framework: torch' is the default, ignored")
+        elif key == "observation_filter":
+            if value not in OBSERVATION_FILTERS:
+                raise UsageError(
+                    f"{value!r} is invalid: allowed {' | '.join(OBSERVATION_FILTERS)}",
+                    source=source,
+                    key="observation_filter",
+                )
+            if value == "MeanStdFilter":
+                out["env_to_module_connector"] = mean_std_filter_connector
+                warnings.append(
+                    f"{source}: legacy key 'observation_filter: MeanStdFilter' translated to a "
+                    "MeanStdFilter env-to-module connector"
+                )
+            else:
+                warnings.append(f"{source}: legacy key 'observation_filter: NoFilter' ignored")
+        else:
+            out[key] = value
+    if model_config:
+        out["model_config"] = model_config
+    return out, warnings
+
+
+def _check_model_key(key: str, source: str, shown: str) -> None:
+    from dataclasses import fields
+
+    from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
+
+    allowed = sorted(f.name for f in fields(DefaultModelConfig))
+    if key not in allowed:
+        raise UsageError(
+            f"unknown model setting; allowed: {', '.join(allowed)}", source=source, key=shown
+        )
+
+
+def translate_stop(stop: dict[str, Any], source: str) -> tuple[dict[str, Any], list[str]]:
+    """Rename old result names in a stop dict; values must be numbers."""
+    out: dict[str, Any] = {}
+    warnings: list[str] = []
+    for key, value in stop.items():
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise UsageError(
+                f"stop value {value!r} is invalid: allowed a number", source=source, key=f"stop.{key}"
+            )
+        if key in RENAMED_STOP_KEYS:
+            new = RENAMED_STOP_KEYS[key]
+            warnings.append(f"{source}: legacy stop key '{key}' translated to '{new}'")
+            key = new
+        out[key] = value
+    return out, warnings

@@ -1,0 +1,71 @@
+"""`rllib` command: argument parsing and dispatch to train / evaluate / report."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from rllib_asor.cli.errors import UsageError
+
+
+def _report_module():
+    """`rllib_asor.cli.report` (written separately); None while it does not exist."""
+    try:
+        return importlib.import_module("rllib_asor.cli.report")
+    except ModuleNotFoundError as e:
+        if e.name != "rllib_asor.cli.report":
+            raise
+        return None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full `rllib` parser."""
+    from rllib_asor.cli import evaluate, train
+
+    parser = argparse.ArgumentParser(
+        prog="rllib", description="Train and evaluate RLlib (new API stack) agents, with ASOR."
+    )
+    sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report}")
+    sub.required = True
+    p_train = sub.add_parser("train", help="train from a YAML file or --run/--env flags")
+    train.add_arguments(p_train)
+    p_train.set_defaults(func=train.run)
+    p_eval = sub.add_parser("evaluate", help="run episodes with a trained checkpoint")
+    evaluate.add_arguments(p_eval)
+    p_eval.set_defaults(func=evaluate.run)
+    p_report = sub.add_parser("report", help="tables and curves from a results directory")
+    report = _report_module()
+    if report is not None:
+        report.add_arguments(p_report)
+        p_report.set_defaults(func=report.run)
+    else:
+        p_report.add_argument("rest", nargs=argparse.REMAINDER)
+        p_report.set_defaults(func=_report_missing)
+    return parser
+
+
+def _report_missing(args: argparse.Namespace) -> int:
+    raise UsageError("not available yet (rllib_asor.cli.report is not installed)", key="report")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `rllib` console script; returns the exit status.
+
+    0 success, 1 training failed (a trial errored), 2 bad input (one line on stderr).
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except UsageError as e:
+        print(f"rllib {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"rllib {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

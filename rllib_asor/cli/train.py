@@ -1,0 +1,155 @@
+"""`rllib train`: validate every experiment, start/join Ray, run each with Ray Tune."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from typing import Any
+
+from rllib_asor.cli import experiment as E
+from rllib_asor.cli.errors import UsageError
+
+DEFAULT_STORAGE = "~/ray_results"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of `rllib train [file PATH]`."""
+    parser.add_argument("source", nargs="*", metavar="file PATH",
+                        help="'file PATH' of a YAML experiment file (old RLlib format)")
+    parser.add_argument("-f", "--config-file", help="same as 'file PATH'")
+    parser.add_argument("--run", help="algorithm (PPO, SAC, ...) when no file is given")
+    parser.add_argument("--env", help="env id when no file is given")
+    parser.add_argument("--config", help="JSON algorithm config when no file is given")
+    parser.add_argument("--name", help="experiment name when no file is given")
+    parser.add_argument("--test", action="store_true",
+                        help="local tiny run: 2 env runners at 0.5 CPU, batch 256, 2 iterations")
+    parser.add_argument("--num-env-runners", type=int, help="override num_env_runners")
+    parser.add_argument("--stop", action="append", metavar="KEY=VALUE",
+                        help="stop criterion (repeatable); legacy names are translated")
+    parser.add_argument("--storage-path", help=f"results root (default {DEFAULT_STORAGE})")
+    parser.add_argument("--resume", action="store_true",
+                        help="resume the experiment found under the storage path")
+    parser.add_argument("--address", help="join a running Ray cluster (HOST:PORT or auto)")
+    parser.add_argument("--checkpoint-freq", type=int, help="checkpoint every N iterations")
+    parser.add_argument("--keep-checkpoints", type=int,
+                        help=f"checkpoints to keep per trial (default {E.DEFAULT_NUM_TO_KEEP})")
+
+
+def load_experiments(args: argparse.Namespace) -> list[E.Experiment]:
+    """Experiments from `file PATH` / `-f PATH` or from `--run/--env/--config`."""
+    path = args.config_file
+    if args.source:
+        if args.source[0] != "file" or len(args.source) != 2:
+            raise UsageError(f"{' '.join(args.source)!r} is invalid: allowed 'file PATH'",
+                             key="rllib train")
+        path = args.source[1]
+    if path:
+        if args.run or args.env or args.config:
+            raise UsageError("give either 'file PATH' or --run/--env/--config, not both",
+                             key="rllib train")
+        exps = E.load_file(path)
+        if args.name and len(exps) == 1:
+            exps[0].name = args.name
+        return exps
+    if not args.run or not args.env:
+        raise UsageError("missing input: allowed 'file PATH' or --run ALGO --env ID [--config JSON]",
+                         key="rllib train")
+    return [E.from_flags(args.run, args.env, args.config, args.name)]
+
+
+def storage_path(args: argparse.Namespace, exp: E.Experiment) -> str:
+    path = args.storage_path or exp.storage_path or DEFAULT_STORAGE
+    if "://" in path:
+        return path
+    return os.path.abspath(os.path.expanduser(path))
+
+
+def _trainable(exp: E.Experiment) -> Any:
+    if exp.asor is None:
+        return E.algorithm_class(exp)
+    from rllib_asor.rllib.trainable import asor_trainable
+
+    return asor_trainable(exp.run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Validate all experiments first (exit 2 on bad input), then train each (exit 1 on failure)."""
+    stop = E.parse_stop_flags(args.stop)
+    exps = load_experiments(args)
+    configs = []
+    for exp in exps:
+        E.apply_overrides(exp, test=args.test, num_env_runners=args.num_env_runners, stop=stop,
+                          checkpoint_freq=args.checkpoint_freq,
+                          keep_checkpoints=args.keep_checkpoints)
+        configs.append(E.validate(exp))
+        if args.resume:
+            _check_resumable(os.path.join(storage_path(args, exp), exp.name))
+    for exp in exps:
+        for warning in dict.fromkeys(exp.warnings):
+            print(f"rllib: warning: {warning}", file=sys.stderr)
+    # Tune's CLIReporter (our live table) is used only with the old output engine.
+    os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
+    from rllib_asor.cli.cluster import start_ray
+
+    start_ray(None if args.test else args.address, max(E.required_cpus(c) for c in configs))
+    failed = 0
+    for exp, cfg in zip(exps, configs, strict=True):
+        failed += _run_one(exp, cfg, args)
+    return 1 if failed else 0
+
+
+def _check_resumable(path: str) -> None:
+    from ray import tune
+
+    if "://" not in path and not os.path.isdir(path) or not tune.Tuner.can_restore(path):
+        raise UsageError(f"no previous run to resume at {path} (train once without --resume)",
+                         key="--resume")
+
+
+def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> int:
+    """Run one experiment with Tune; return the number of errored trials."""
+    from ray import tune
+
+    from rllib_asor.cli import envs
+    from rllib_asor.cli.progress import ProgressReporter
+
+    envs.register_with_tune(exp.env)
+    trainable = _trainable(exp)
+    space = E.param_space(exp, algo_config)
+    root = storage_path(args, exp)
+    print(f"rllib: {exp.name}: {exp.run} on {exp.env}, {exp.num_trials} trial(s), "
+          f"stop {exp.stop}, results in {os.path.join(root, exp.name)}", flush=True)
+    if args.resume:
+        tuner = tune.Tuner.restore(os.path.join(root, exp.name), trainable=trainable,
+                                   param_space=space, resume_unfinished=True, resume_errored=True)
+    else:
+        run_config = tune.RunConfig(
+            name=exp.name,
+            storage_path=root,
+            stop=exp.stop or None,
+            checkpoint_config=tune.CheckpointConfig(**E.checkpoint_kwargs(exp)),
+            progress_reporter=ProgressReporter(),
+            verbose=1,
+        )
+        tuner = tune.Tuner(trainable, param_space=space, run_config=run_config,
+                           tune_config=tune.TuneConfig(num_samples=exp.num_samples))
+    results = tuner.fit()
+    _print_summary(exp, results)
+    return len(results.errors)
+
+
+def _print_summary(exp: E.Experiment, results: Any) -> None:
+    print(f"rllib: {exp.name}: {len(results)} trial(s), {len(results.errors)} errored")
+    for result in results:
+        m = result.metrics or {}
+        ret = (m.get("env_runners") or {}).get("episode_return_mean")
+        steps = m.get("num_env_steps_sampled_lifetime")
+        ckpt = result.checkpoint.path if result.checkpoint else None
+        status = "ERROR" if result.error else "OK"
+        ret_s = f"{ret:.2f}" if isinstance(ret, int | float) else "n/a"
+        print(f"  {status} iter={m.get('training_iteration')} env_steps={steps} "
+              f"return_mean={ret_s} checkpoint={ckpt}")
+        if result.error:
+            first = str(result.error).strip().splitlines()
+            print(f"    error: {first[-1] if first else type(result.error).__name__}")
