@@ -96,14 +96,21 @@ class AsorConfig:
             _fail("label_smoothing", self.label_smoothing, "a number in [0, 0.5)")
         for key in ("disc_hiddens", "rnd_hiddens"):
             v = getattr(self, key)
-            if not isinstance(v, Sequence) or isinstance(v, str) or not v or not all(
-                isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in v
+            if (
+                not isinstance(v, Sequence)
+                or isinstance(v, str)
+                or not v
+                or not all(isinstance(h, int) and not isinstance(h, bool) and h > 0 for h in v)
             ):
                 _fail(key, v, "a non-empty list of positive integers")
             setattr(self, key, list(v))
         for key in ("rnd_embedding_dim", "ensemble_size"):
             v = getattr(self, key)
-            if not isinstance(v, int) or isinstance(v, bool) or v < (2 if key == "ensemble_size" else 1):
+            if (
+                not isinstance(v, int)
+                or isinstance(v, bool)
+                or v < (2 if key == "ensemble_size" else 1)
+            ):
                 _fail(key, v, "an integer ≥ 2" if key == "ensemble_size" else "an integer ≥ 1")
         for key in ("lambda_target", "lambda_max", "lambda_init"):
             v = getattr(self, key)
@@ -116,7 +123,9 @@ class AsorConfig:
             or not all(isinstance(k, str) for k in self.obs_keys)
         ):
             _fail("obs_keys", self.obs_keys, "null or a non-empty list of observation keys")
-        if self.seed is not None and (not isinstance(self.seed, int) or isinstance(self.seed, bool)):
+        if self.seed is not None and (
+            not isinstance(self.seed, int) or isinstance(self.seed, bool)
+        ):
             _fail("seed", self.seed, "null or an integer")
 
     def _validate_lambda(self) -> None:

@@ -1,0 +1,54 @@
+"""Lift ASOR's Learner statistics into the results as `asor/<name>`.
+
+The Learner logs them under its module ids (`learners/asor_disc.<policy>/...`); users read
+`asor/disc_loss`, `asor/aug_reward_mean`, ... (single policy) or `asor/<policy>/...`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ray.rllib.callbacks.callbacks import RLlibCallback
+
+from rllib_asor.rllib.learners import DISC_PREFIX, PROXY_PREFIX
+
+ASOR_METRICS = frozenset(
+    {
+        # discriminator update (rllib_asor.asor.discriminator.discriminator_loss)
+        "disc_loss", "disc_acc_real", "disc_acc_fake", "disc_bce_real", "disc_bce_fake",
+        "disc_entropy", "js_estimate",
+        # reward augmentation (AsorRewardConnector)
+        "lambda", "real_fraction", "aug_reward_mean", "aug_reward_min", "aug_reward_max",
+        "bonus_mean", "env_reward_mean", "value_mean", "value_real_mean", "omega_real_mean",
+        "omega_generated_mean",
+        # proxies
+        "rnd_loss", "ensemble_loss",
+    }
+)  # fmt: skip
+
+
+def lift_asor_metrics(result: dict[str, Any]) -> dict[str, Any]:
+    """Collect `learners/asor_*.<pid>/*` into a dict keyed by pid (flat for one policy)."""
+    per_policy: dict[str, dict[str, Any]] = {}
+    for module_id, stats in (result.get("learners") or {}).items():
+        for prefix in (DISC_PREFIX, PROXY_PREFIX):
+            if module_id.startswith(prefix) and isinstance(stats, dict):
+                pid = module_id[len(prefix) :]
+                per_policy.setdefault(pid, {}).update(
+                    {k: float(v) for k, v in stats.items() if k in ASOR_METRICS}
+                )
+    for stats in per_policy.values():
+        if "disc_acc_real" in stats and "disc_acc_fake" in stats:
+            stats["disc_acc"] = 0.5 * (stats["disc_acc_real"] + stats["disc_acc_fake"])
+    if len(per_policy) == 1:
+        return next(iter(per_policy.values()))
+    return per_policy
+
+
+class AsorMetricsCallback(RLlibCallback):
+    """Adds `result["asor"]` after every training iteration."""
+
+    def on_train_result(self, *, algorithm: Any = None, result: dict, **kwargs: Any) -> None:
+        lifted = lift_asor_metrics(result)
+        if lifted:
+            result["asor"] = lifted

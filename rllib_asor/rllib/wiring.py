@@ -1,0 +1,145 @@
+"""`with_asor(config, **settings)`: switch ASOR on for an RLlib AlgorithmConfig.
+
+What it wires in:
+- the algorithm's ASOR Learner class (PPO: `AsorPPOTorchLearner`),
+- per trained policy a `learner_only` discriminator and (modes `asor`/`count`) a proxy module
+  in the MultiRLModule (`asor_disc.<policy>`, `asor_proxy.<policy>`),
+- the validated settings in `learner_config_dict["asor"]` (pickled into every Learner and
+  checkpoint),
+- a callback that lifts the Learner's ASOR statistics to `asor/...` in the results.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
+from ray.rllib.core import DEFAULT_MODULE_ID
+from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
+from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+
+from rllib_asor.asor.config import AsorConfig
+from rllib_asor.rllib.callbacks import AsorMetricsCallback
+from rllib_asor.rllib.learners import (
+    AsorPPOTorchLearner,
+    disc_module_id,
+    is_aux_module,
+    proxy_module_id,
+)
+from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
+
+SUPPORTED = {"PPO": AsorPPOTorchLearner}
+
+
+class AsorMultiRLModuleSpec(MultiRLModuleSpec):
+    """A MultiRLModuleSpec whose ASOR modules inherit their policy's spaces at build time.
+
+    RLlib fills missing spaces only for policies; an auxiliary module `asor_disc.<pid>` takes
+    the observation/action space of `<pid>`.
+    """
+
+    def build(self, module_id: str | None = None) -> Any:
+        for mid, spec in self.rl_module_specs.items():
+            if is_aux_module(mid):
+                policy = self.rl_module_specs.get(mid.split(".", 1)[1])
+                if policy is not None:
+                    spec.observation_space = spec.observation_space or policy.observation_space
+                    spec.action_space = spec.action_space or policy.action_space
+        return super().build(module_id)
+
+
+def register_learner(algo_name: str, learner_class: type) -> None:
+    """Make `with_asor` support another algorithm (used by the SAC/offline integrations)."""
+    SUPPORTED[algo_name] = learner_class
+
+
+def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
+    """Return a copy of `config` with ASOR wired in; `settings` are `AsorConfig` fields.
+
+    Raises ValueError for unsupported algorithms, the old API stack, or bad settings.
+    """
+    asor = AsorConfig.from_dict(settings)
+    if not isinstance(config, AlgorithmConfig):
+        raise ValueError(f"with_asor needs an RLlib AlgorithmConfig, got {type(config).__name__}")
+    algo = config.algo_class.__name__ if config.algo_class is not None else type(config).__name__
+    learner_class = SUPPORTED.get(algo)
+    if learner_class is None:
+        raise ValueError(
+            f"ASOR does not support algorithm {algo!r}: supported {', '.join(sorted(SUPPORTED))}"
+        )
+    if not config.enable_rl_module_and_learner:
+        raise ValueError("ASOR needs RLlib's new API stack (enable_rl_module_and_learner=True)")
+    if config.framework_str != "torch":
+        raise ValueError(f"ASOR needs framework='torch', got {config.framework_str!r}")
+
+    config = config.copy(copy_frozen=False)
+    asor_dict = asor.to_dict()
+    config.rl_module(rl_module_spec=_module_spec(config, asor))
+    config.learners(
+        learner_class=learner_class,
+        learner_config_dict={**(config.learner_config_dict or {}), "asor": asor_dict},
+    )
+    config.callbacks(callbacks_class=_with_callback(config.callbacks_class))
+    return config
+
+
+def trained_policy_ids(config: AlgorithmConfig) -> list[str]:
+    """The policies ASOR regularises: all trained ones (single-agent: the default policy)."""
+    if not config.is_multi_agent:
+        return [DEFAULT_MODULE_ID]
+    pids = list(config.policies)
+    to_train = config.policies_to_train
+    if to_train is not None and not callable(to_train):
+        pids = [p for p in pids if p in set(to_train)]
+    return pids
+
+
+def _module_spec(config: AlgorithmConfig, asor: AsorConfig) -> AsorMultiRLModuleSpec:
+    existing = config._rl_module_spec
+    pids = trained_policy_ids(config)
+    if isinstance(existing, MultiRLModuleSpec):
+        specs = {m: s for m, s in existing.rl_module_specs.items() if not is_aux_module(m)}
+    elif isinstance(existing, RLModuleSpec):
+        specs = {
+            pid: copy.deepcopy(existing)
+            for pid in (pids if config.is_multi_agent else [DEFAULT_MODULE_ID])
+        }
+    else:
+        specs = {
+            pid: RLModuleSpec() for pid in (pids if config.is_multi_agent else [DEFAULT_MODULE_ID])
+        }
+    model_config = {"asor": asor.to_dict()}
+    for pid in pids:
+        policy_spec = config.policies.get(pid) if config.is_multi_agent else None
+        spaces = {
+            "observation_space": getattr(policy_spec, "observation_space", None),
+            "action_space": getattr(policy_spec, "action_space", None),
+        }
+        specs[disc_module_id(pid)] = RLModuleSpec(
+            module_class=AsorDiscriminatorModule,
+            learner_only=True,
+            model_config=dict(model_config),
+            **spaces,
+        )
+        if asor.needs_proxy:
+            specs[proxy_module_id(pid)] = RLModuleSpec(
+                module_class=AsorProxyModule,
+                learner_only=True,
+                model_config=dict(model_config),
+                **spaces,
+            )
+    return AsorMultiRLModuleSpec(rl_module_specs=specs)
+
+
+def _with_callback(existing: Any) -> list[type]:
+    if existing is None:
+        classes: list[type] = []
+    elif isinstance(existing, list | tuple):
+        classes = list(existing)
+    else:
+        classes = [existing]
+    from ray.rllib.callbacks.callbacks import RLlibCallback
+
+    classes = [c for c in classes if c is not RLlibCallback and c is not AsorMetricsCallback]
+    return [*classes, AsorMetricsCallback]
