@@ -1,15 +1,123 @@
-"""`rllib evaluate CHECKPOINT`."""
+"""`rllib evaluate CHECKPOINT`: run N episodes with a trained policy on the checkpoint's env.
+
+The algorithm is restored with `Algorithm.from_checkpoint(path, config=...)` using the
+checkpoint's own config, changed only to sample locally (no remote env runners, one env);
+episodes come from the local env runner, so the same env-to-module connectors (filters,
+one-hot, ...) that ran in training run here too.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
+import os
+import pickle
+import sys
+from typing import Any
+
+from rllib_asor.cli.errors import UsageError
+
+CHECKPOINT_MARKER = "rllib_checkpoint.json"
+CTOR_FILE = "class_and_ctor_args.pkl"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("checkpoint")
-    parser.add_argument("--episodes", type=int, default=10)
-    parser.add_argument("--json", action="store_true")
+    """Options of `rllib evaluate`."""
+    parser.add_argument("checkpoint", help="checkpoint dir (or a trial/experiment dir: latest one)")
+    parser.add_argument("--episodes", type=int, default=10, help="episodes to run (default 10)")
+    parser.add_argument("--explore", action="store_true",
+                        help="sample actions from the policy (default: deterministic)")
+    parser.add_argument("--seed", type=int, help="seed of the evaluation env")
+    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+
+def find_checkpoint(path: str) -> str:
+    """`path` itself if it is an RLlib checkpoint, else the newest checkpoint below it."""
+    path = os.path.abspath(os.path.expanduser(path))
+    if not os.path.exists(path):
+        raise UsageError("not found; allowed: an RLlib checkpoint directory", source=path)
+    if os.path.isfile(os.path.join(path, CHECKPOINT_MARKER)):
+        return path
+    found = []
+    for root, dirs, files in os.walk(path):
+        if CHECKPOINT_MARKER in files and os.path.basename(root).startswith("checkpoint_"):
+            found.append(root)
+            dirs.clear()
+    if not found:
+        raise UsageError("no RLlib checkpoint in this directory; allowed: a checkpoint_NNNNNN "
+                         "directory written by 'rllib train'", source=path)
+    return max(found, key=lambda p: (os.path.getmtime(p), p))
+
+
+def _local_config(path: str, seed: int | None) -> dict[str, Any]:
+    """The checkpoint's config dict, changed to sample locally with one env."""
+    try:
+        with open(os.path.join(path, CTOR_FILE), "rb") as f:
+            ctor = pickle.load(f)
+        config = ctor["ctor_args_and_kwargs"][0][0]
+    except Exception as e:
+        raise UsageError(f"cannot read the algorithm config ({type(e).__name__}: {e})",
+                         source=os.path.join(path, CTOR_FILE)) from None
+    config = config.to_dict() if hasattr(config, "to_dict") else dict(config)
+    config.update(num_env_runners=0, num_envs_per_env_runner=1, evaluation_num_env_runners=0,
+                  evaluation_interval=None, num_learners=0, create_env_on_driver=True)
+    if seed is not None:
+        config["seed"] = seed
+    return config
+
+
+def evaluate(path: str, episodes: int, explore: bool = False, seed: int | None = None
+             ) -> dict[str, Any]:
+    """Restore the algorithm at `path` and run `episodes` episodes; return the statistics."""
+    from ray.rllib.algorithms.algorithm import Algorithm
+
+    from rllib_asor.cli import envs
+    from rllib_asor.cli.cluster import start_ray
+
+    config = _local_config(path, seed)
+    env_id = config.get("env")
+    if isinstance(env_id, str):
+        envs.register_with_tune(env_id)
+    start_ray(None, 1)
+    algo = Algorithm.from_checkpoint(path, config=config)
+    try:
+        done = algo.env_runner.sample(num_episodes=episodes, explore=explore)
+    finally:
+        algo.stop()
+    returns = [float(ep.get_return()) for ep in done][:episodes]
+    lengths = [int(len(ep)) for ep in done][:episodes]
+    mean = sum(returns) / len(returns)
+    std = math.sqrt(sum((r - mean) ** 2 for r in returns) / len(returns))
+    return {
+        "checkpoint": path,
+        "env": env_id if isinstance(env_id, str) else str(env_id),
+        "episodes": len(returns),
+        "explore": explore,
+        "return_mean": mean,
+        "return_std": std,
+        "return_min": min(returns),
+        "return_max": max(returns),
+        "returns": returns,
+        "lengths": lengths,
+    }
 
 
 def run(args: argparse.Namespace) -> int:
+    """`rllib evaluate`: print mean/std return and per-episode returns (or JSON)."""
+    if args.episodes < 1:
+        raise UsageError(f"{args.episodes} is invalid: allowed an integer >= 1", key="--episodes")
+    path = find_checkpoint(args.checkpoint)
+    stats = evaluate(path, args.episodes, explore=args.explore, seed=args.seed)
+    if args.json:
+        print(json.dumps(stats))
+        return 0
+    policy = "stochastic (--explore)" if stats["explore"] else "deterministic"
+    print(f"checkpoint: {stats['checkpoint']}")
+    print(f"env: {stats['env']}  episodes: {stats['episodes']}  policy: {policy}")
+    print(f"return: mean {stats['return_mean']:.3f}  std {stats['return_std']:.3f}  "
+          f"min {stats['return_min']:.3f}  max {stats['return_max']:.3f}")
+    print("episode returns: " + " ".join(f"{r:g}" for r in stats["returns"]))
+    print("episode lengths: " + " ".join(str(n) for n in stats["lengths"]))
+    sys.stdout.flush()
     return 0
