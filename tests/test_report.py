@@ -279,6 +279,7 @@ def test_race_and_asor_metrics_become_extra_columns(fixture_results: Path, tmp_p
     assert mean == pytest.approx(np.mean([0.0, 0.1, 0.2, 0.3, 0.4]))
     ppo = next(g for g in rep.groups if g.method == "PPO" and g.env == "LavaWorld-v0")
     assert np.isnan(ppo.extra["env_runners/race/success_rate"][0])  # plain PPO has no race metric
+    assert table_rows(md, "LavaWorld-v0")["PPO"][6:] == ["n/a", "n/a"]
 
 
 def test_columns_option_selects_extra_columns(fixture_results: Path) -> None:

@@ -372,6 +372,10 @@ def _fmt(v: float) -> str:
     return f"{v:.3g}"
 
 
+def _pm(mean: float, std: float) -> str:
+    return f"{_fmt(mean)} ± {_fmt(std)}" if math.isfinite(mean) else "n/a"
+
+
 def _slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "env"
 
@@ -492,12 +496,12 @@ def render_markdown(report: Report, results_dir: Path, plots: dict[str, str]) ->
             cells = [
                 g.method,
                 str(g.n),
-                f"{_fmt(g.mean)} ± {_fmt(g.std)}",
+                _pm(g.mean, g.std),
                 ci,
                 _fmt(g.iqm),
                 f"{g.env_steps:,.0f}" if math.isfinite(g.env_steps) else "n/a",
             ]
-            cells += [f"{_fmt(m)} ± {_fmt(s)}" for m, s in (g.extra[c] for c in report.columns)]
+            cells += [_pm(*g.extra[c]) for c in report.columns]
             out.append("| " + " | ".join(cells) + " |")
         if env in plots:
             out += ["", f"![{env} learning curves]({plots[env]})"]
