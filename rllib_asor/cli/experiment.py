@@ -134,10 +134,10 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     asor = config.pop("asor", None)
     if asor is not None:
         asor = _mapping(asor, source, f"{name}.config.asor")
-    config, more = legacy.translate_config(config, source)
+    config, more = legacy.translate_config(config, source, f"{name}.config.")
     warns += more
     stop, more = legacy.translate_stop(
-        _mapping(spec.get("stop") or {}, source, f"{name}.stop"), source
+        _mapping(spec.get("stop") or {}, source, f"{name}.stop"), source, f"{name}.stop."
     )
     warns += more
     env = spec.get("env", config.pop("env", None))
@@ -200,7 +200,7 @@ def parse_stop_flags(items: list[str] | None) -> dict[str, Any]:
         except yaml.YAMLError:
             value = raw
         stop[key] = value
-    translated, _ = legacy.translate_stop(stop, "--stop")
+    translated, _ = legacy.translate_stop(stop, "--stop", "--stop ")
     return translated
 
 
@@ -364,6 +364,13 @@ def validate_asor(exp: Experiment) -> None:
         return
     from rllib_asor.asor.config import ALGORITHMS, AsorConfig
 
+    try:  # what the RLlib glue supports now (a subset of what the method is defined for)
+        with _quiet():
+            from rllib_asor.rllib.wiring import SUPPORTED
+
+        ALGORITHMS = tuple(sorted(SUPPORTED))  # noqa: N806
+    except ImportError:
+        pass
     if exp.run not in ALGORITHMS:
         raise UsageError(
             f"ASOR does not support {exp.run!r}; allowed: {', '.join(ALGORITHMS)}",

@@ -63,7 +63,9 @@ def mean_std_filter_connector(env: Any = None, spaces: Any = None, device: Any =
     return MeanStdFilter()
 
 
-def translate_config(config: dict[str, Any], source: str) -> tuple[dict[str, Any], list[str]]:
+def translate_config(
+    config: dict[str, Any], source: str, prefix: str = ""
+) -> tuple[dict[str, Any], list[str]]:
     """Return (new-stack config dict, warnings); raise UsageError for unsupported legacy values.
 
     `model: {...}` becomes `model_config: {...}`, `framework: tf` is refused (torch only),
@@ -86,7 +88,7 @@ def translate_config(config: dict[str, Any], source: str) -> tuple[dict[str, Any
                 )
             if value:
                 for sub, sub_value in value.items():
-                    _check_model_key(sub, source, f"model.{sub}")
+                    _check_model_key(sub, source, f"{prefix}model.{sub}")
                     model_config.setdefault(sub, sub_value)
                 warnings.append(
                     f"{source}: legacy key 'model' ({', '.join(sorted(value))}) translated to "
@@ -101,7 +103,7 @@ def translate_config(config: dict[str, Any], source: str) -> tuple[dict[str, Any
                     f"framework {value!r} is not supported: allowed 'torch' (rllib-asor runs the "
                     "new API stack with torch only)",
                     source=source,
-                    key="framework",
+                    key=f"{prefix}framework",
                 )
             warnings.append(f"{source}: key 'framework: torch' is the default, ignored")
         elif key == "observation_filter":
@@ -109,7 +111,7 @@ def translate_config(config: dict[str, Any], source: str) -> tuple[dict[str, Any
                 raise UsageError(
                     f"{value!r} is invalid: allowed {' | '.join(OBSERVATION_FILTERS)}",
                     source=source,
-                    key="observation_filter",
+                    key=f"{prefix}observation_filter",
                 )
             if value == "MeanStdFilter":
                 out["env_to_module_connector"] = mean_std_filter_connector
@@ -138,14 +140,16 @@ def _check_model_key(key: str, source: str, shown: str) -> None:
         )
 
 
-def translate_stop(stop: dict[str, Any], source: str) -> tuple[dict[str, Any], list[str]]:
+def translate_stop(
+    stop: dict[str, Any], source: str, prefix: str = "stop."
+) -> tuple[dict[str, Any], list[str]]:
     """Rename old result names in a stop dict; values must be numbers."""
     out: dict[str, Any] = {}
     warnings: list[str] = []
     for key, value in stop.items():
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise UsageError(
-                f"stop value {value!r} is invalid: allowed a number", source=source, key=f"stop.{key}"
+                f"stop value {value!r} is invalid: allowed a number", source=source, key=f"{prefix}{key}"
             )
         if key in RENAMED_STOP_KEYS:
             new = RENAMED_STOP_KEYS[key]
