@@ -153,7 +153,7 @@ def fixture_results(tmp_path: Path) -> Path:
     write_trial(
         root,
         "lava-srpo",
-        "PPO_LavaWorld-v0_ccccc_00000_0",
+        "AsorPPO_LavaWorld-v0_ccccc_00000_0",  # our ASOR trainable (rllib_asor.rllib.trainable)
         {**lava, "asor": {"mode": "srpo"}},
         [5.0, 6.0],
     )

@@ -198,8 +198,10 @@ def algo_name(trial: Trial) -> str:
     """Algorithm from the trial folder name (``PPO_CartPole-v1_...``), else the experiment name."""
     by_len = sorted(KNOWN_ALGOS, key=len, reverse=True)
     head = trial.path.name.split("_", 1)[0]
+    # Our ASOR trainables are named Asor<run> (rllib_asor.rllib.trainable): AsorPPO -> PPO.
+    bare = head[4:] if head.lower().startswith("asor") else head
     for name in by_len:
-        if head.lower() == name.lower():
+        if bare.lower() == name.lower():
             return name
     for token in re.split(r"[^A-Za-z0-9]+", trial.experiment):
         for name in by_len:
