@@ -14,6 +14,8 @@ BASE_COLUMNS = {
     "time_total_s": "time (s)",
 }
 MAX_ASOR_COLUMNS = 6
+# Shown first when present (DESIGN.md names); other asor/* metrics fill the remaining columns.
+PREFERRED_ASOR = ("disc_acc", "real_fraction", "aug_reward_mean", "disc_loss", "rnd_loss", "lambda")
 
 
 class ProgressReporter(CLIReporter):
@@ -24,11 +26,18 @@ class ProgressReporter(CLIReporter):
         self._asor_seen: set[str] = set()
 
     def report(self, trials: list[Any], done: bool, *sys_info: str) -> None:
+        found: set[str] = set()
         for trial in trials:
-            for key in flatten_dict(trial.last_result or {}, delimiter="/"):
-                if len(self._asor_seen) >= MAX_ASOR_COLUMNS:
-                    break
-                if "asor/" in key and key not in self._asor_seen:
-                    self._asor_seen.add(key)
-                    self.add_metric_column(key, key[key.index("asor/"):])
+            found.update(k for k in flatten_dict(trial.last_result or {}, delimiter="/")
+                         if "asor/" in k)
+        for key in sorted(found - self._asor_seen, key=_rank):
+            if len(self._asor_seen) >= MAX_ASOR_COLUMNS:
+                break
+            self._asor_seen.add(key)
+            self.add_metric_column(key, key[key.index("asor/"):])
         super().report(trials, done, *sys_info)
+
+
+def _rank(key: str) -> tuple[int, str]:
+    name = key.rsplit("asor/", 1)[-1]
+    return (PREFERRED_ASOR.index(name) if name in PREFERRED_ASOR else len(PREFERRED_ASOR), key)
