@@ -195,13 +195,19 @@ def parse_stop_flags(items: list[str] | None) -> dict[str, Any]:
         if not sep or not key:
             raise UsageError(f"{item!r} is invalid: allowed KEY=VALUE, e.g. training_iteration=10",
                              key="--stop")
-        try:
-            value = yaml.safe_load(raw)
-        except yaml.YAMLError:
-            value = raw
-        stop[key] = value
-    translated, _ = legacy.translate_stop(stop, "--stop", "--stop ")
+        stop[key] = _number(raw.strip())
+    translated, _ = legacy.translate_stop(stop, "", "--stop ")
     return translated
+
+
+def _number(raw: str) -> Any:
+    """'10' -> 10, '1e5' -> 100000.0, anything else stays a string."""
+    for cast in (int, float):
+        try:
+            return cast(raw)
+        except ValueError:
+            pass
+    return raw
 
 
 def apply_overrides(

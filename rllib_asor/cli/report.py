@@ -50,7 +50,10 @@ MODE_SUFFIX = {"asor": "+ASOR", "srpo": "+SRPO"}
 """Method suffix per ASOR partition mode; other modes become ``+ASOR(<mode>)``."""
 
 EXTRA_METRIC_RE = re.compile(r"(^|/)(race|asor)/")
-"""Result keys reported as extra columns by default (``race/...`` and ``asor/...`` metrics)."""
+"""Result keys eligible as extra columns: ``race/...`` and ``asor/...`` metrics."""
+
+HEADLINE_ASOR = ("disc_acc", "real_fraction", "aug_reward_mean", "lambda")
+"""ASOR metrics shown by default (all ``race/...`` metrics are; ``--columns all`` shows every one)."""
 
 
 @dataclass
@@ -308,6 +311,14 @@ def _mean_std(vals: Sequence[float]) -> tuple[float, float]:
     return float(arr.mean()), float(arr.std(ddof=1)) if arr.size > 1 else 0.0
 
 
+def _is_headline(key: str) -> bool:
+    """Default extra column: any race/... metric, and the headline asor/... ones."""
+    parts = key.split("/")
+    if "race" in parts[:-1]:
+        return True
+    return "asor" in parts[:-1] and parts[-1] in HEADLINE_ASOR
+
+
 def summarize(
     results_dir: str | os.PathLike[str],
     metric: str = DEFAULT_METRIC,
@@ -339,11 +350,12 @@ def summarize(
         notes.append(f"x key {x!r} missing in some trials; curves use {FALLBACK_X!r}")
         x = FALLBACK_X
 
+    found = {k for t in with_metric for r in t.rows for k in r if EXTRA_METRIC_RE.search(k)}
     if columns is None:
-        found = {k for t in with_metric for r in t.rows for k in r if EXTRA_METRIC_RE.search(k)}
-        columns = sorted(found - {metric})
-    else:
-        columns = [c for c in columns if c != metric]
+        columns = sorted(k for k in found if _is_headline(k))
+    elif list(columns) == ["all"]:
+        columns = sorted(found)
+    columns = [c for c in columns if c != metric]
 
     groups: list[GroupStats] = []
     keyed: dict[tuple[str, str], list[Trial]] = {}
@@ -622,7 +634,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=_columns,
         action="extend",
         default=None,
-        help="extra final-metric columns (default: every race/... and asor/... key)",
+        help="extra final-metric columns, or 'all' for every race/... and asor/... key "
+        "(default: race/... and asor/{disc_acc,real_fraction,aug_reward_mean,lambda})",
     )
 
 

@@ -23,7 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", help="JSON algorithm config when no file is given")
     parser.add_argument("--name", help="experiment name when no file is given")
     parser.add_argument("--test", action="store_true",
-                        help="local tiny run: 2 env runners at 0.5 CPU, batch 256, 2 iterations")
+                        help="tiny run: 2 env runners at 0.5 CPU, batch 256, 2 iterations")
     parser.add_argument("--num-env-runners", type=int, help="override num_env_runners")
     parser.add_argument("--stop", action="append", metavar="KEY=VALUE",
                         help="stop criterion (repeatable); legacy names are translated")
@@ -85,14 +85,16 @@ def run(args: argparse.Namespace) -> int:
         configs.append(E.validate(exp))
         if args.resume:
             _check_resumable(os.path.join(storage_path(args, exp), exp.name))
+    from rllib_asor.cli.cluster import probe, start_ray
+
+    if args.address:
+        probe(args.address)  # fail fast (exit 2) before anything else is printed
     for exp in exps:
         for warning in dict.fromkeys(exp.warnings):
             print(f"rllib: warning: {warning}", file=sys.stderr)
     # Tune's CLIReporter (our live table) is used only with the old output engine.
     os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
-    from rllib_asor.cli.cluster import start_ray
-
-    start_ray(None if args.test else args.address, max(E.required_cpus(c) for c in configs))
+    start_ray(args.address, max(E.required_cpus(c) for c in configs))
     failed = 0
     for exp, cfg in zip(exps, configs, strict=True):
         failed += _run_one(exp, cfg, args)

@@ -1,0 +1,52 @@
+"""Shared fixtures for the `rllib` CLI tests: YAML writers and one Ray session per run."""
+
+from __future__ import annotations
+
+import os
+import textwrap
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+CARTPOLE_YAML = """
+cartpole-ppo:
+  env: CartPole-v1
+  run: PPO
+  stop: {env_runners/episode_return_mean: 150, num_env_steps_sampled_lifetime: 100000}
+  config:
+    lr: 0.0003
+    num_env_runners: 2
+    num_epochs: 6
+    minibatch_size: 128
+    model_config: {fcnet_hiddens: [32, 32]}
+  checkpoint_config: {checkpoint_frequency: 1, checkpoint_at_end: true}
+"""
+
+
+@pytest.fixture
+def write_yaml(tmp_path: Path) -> Callable[[str, str], str]:
+    """Write a (dedented) YAML text to tmp_path/name and return its path."""
+
+    def write(text: str, name: str = "exp.yaml") -> str:
+        path = tmp_path / name
+        path.write_text(textwrap.dedent(text))
+        return str(path)
+
+    return write
+
+
+@pytest.fixture(scope="session")
+def ray_session() -> Iterator[None]:
+    """One local Ray for every end-to-end CLI test (the CLI reuses an initialised Ray)."""
+    import ray
+
+    os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
+    started = not ray.is_initialized()
+    if started:
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield
+    if started:
+        ray.shutdown()
