@@ -147,6 +147,7 @@ def fixture_results(tmp_path: Path) -> Path:
             extra={
                 "env_runners/race/success_rate": [0.0, 0.5, 0.1 * seed],
                 "learners/__all_modules__/asor/disc_acc": [0.5, 0.6, 0.7],
+                "asor/rnd_loss": [0.3, 0.2, 0.1],
             },
         )
     # PPO+SRPO (top-level `asor` block), ASOR(count): one trial each.
@@ -288,6 +289,14 @@ def test_columns_option_selects_extra_columns(fixture_results: Path) -> None:
     assert rep.groups[0].extra["time_this_iter_s"][0] == pytest.approx(0.5)
     args = parse([str(fixture_results), "--columns", "a/b,c", "--columns", "d"])
     assert args.columns == ["a/b", "c", "d"]
+
+
+def test_default_columns_are_race_and_headline_asor_metrics_all_shows_every_one(
+    fixture_results: Path,
+) -> None:
+    default = report.summarize(fixture_results).columns
+    assert default == ["env_runners/race/success_rate", "learners/__all_modules__/asor/disc_acc"]
+    assert report.summarize(fixture_results, columns=["all"]).columns == ["asor/rnd_loss", *default]
 
 
 def test_last_n_averages_the_last_iterations(fixture_results: Path) -> None:
