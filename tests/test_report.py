@@ -108,6 +108,7 @@ def tune_results(tmp_path_factory: pytest.TempPathFactory) -> Path:
                 name="cartpole-ppo",
                 stop={"training_iteration": 2},
                 storage_path=str(storage),
+                checkpoint_config=tune.CheckpointConfig(checkpoint_at_end=False),
                 verbose=0,
             ),
         ).fit()
