@@ -1,7 +1,32 @@
-"""Procedurally generated Fall-Guys-like obstacle race in MuJoCo (no ray/torch import)."""
+"""Procedurally generated Fall-Guys-like obstacle race in MuJoCo (no ray/torch import).
 
-from game_env.spaces import action_space, observation_space
+``gymnasium.make("game_env/ObstacleRace-v0", map_id=...)`` for one racer,
+``game_env.parallel_env(num_racers=N, map_id=...)`` for a PettingZoo ParallelEnv.
+"""
 
-NUM_MAPS = 10
+import os
 
-__all__ = ["NUM_MAPS", "action_space", "observation_space"]
+if "DISPLAY" not in os.environ:  # headless: MuJoCo's offscreen renderer through EGL
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+import gymnasium  # noqa: E402
+
+from game_env.course import generate_course  # noqa: E402
+from game_env.maps import MAPS, NUM_MAPS  # noqa: E402
+from game_env.parallel import RaceParallelEnv, parallel_env  # noqa: E402
+from game_env.spaces import action_space, observation_space  # noqa: E402
+
+ENV_ID = "game_env/ObstacleRace-v0"
+if ENV_ID not in gymnasium.registry:
+    gymnasium.register(id=ENV_ID, entry_point="game_env.env:ObstacleRaceEnv")
+
+__all__ = [
+    "ENV_ID",
+    "MAPS",
+    "NUM_MAPS",
+    "RaceParallelEnv",
+    "action_space",
+    "generate_course",
+    "observation_space",
+    "parallel_env",
+]

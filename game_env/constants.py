@@ -7,14 +7,14 @@ import math
 GRAVITY = 9.81
 TIMESTEP = 0.002  # s per mj_step
 FRAME_SKIP = 20  # mj_steps per env step (env step = 0.04 s)
-FRICTION = 0.4  # racer/floor sliding friction (elliptic cone); low so walls cannot be climbed
+FRICTION = 0.4  # emulated sliding friction of a knocked racer (decel = FRICTION * g)
 
 RACER_RADIUS = 0.3
 RACER_HALF = 0.35  # half length of the capsule's cylinder
 FEET = RACER_RADIUS + RACER_HALF  # centre height above the feet
 RACER_MASS = 10.0
 RACER_KV = 1000.0  # velocity-actuator gain (N per m/s)
-RACER_FORCE = 150.0  # actuator force limit (N): friction on a wall stays below the weight
+RACER_FORCE = 150.0  # actuator force limit (N)
 
 RUN_SPEED = 4.0
 SPRINT_SPEED = 6.5

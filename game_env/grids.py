@@ -10,11 +10,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from scipy.ndimage import distance_transform_edt
 
 from game_env.course import Course
 from game_env.spaces import GRID, ITEM_TYPES, TERRAIN_TYPES
+
+try:  # the clip ufunc itself (np.clip adds a Python wrapper per call)
+    from numpy._core.umath import clip as _clip
+except ImportError:  # pragma: no cover - older numpy
+    from numpy.core.umath import clip as _clip
 
 FINE = 0.25
 VOID = -100.0
@@ -52,6 +56,8 @@ class CourseGrids:
         self.static_t = np.zeros((nx, ny), np.float32)
         self.items = np.zeros((nx, ny), np.float32)
         self.tile_id = np.full((nx, ny), -1, np.int32)
+        self.belt_x = np.zeros((nx, ny), np.float64)
+        self.belt_y = np.zeros((nx, ny), np.float64)
         self._rasterise()
         self.tile_alive = np.ones(len(course.tiles), bool)
         self.fine_h, self.fine_t = self._compose()
@@ -70,13 +76,29 @@ class CourseGrids:
         for i in (0, 2, 3):
             self.zone_ids[(i, 0)] = _pool(archives, 0.0, ks[i]).astype(np.intp)
             self.zone_ids[(i, 1)] = _pool(goals, 0.0, ks[i]).astype(np.intp)
-        shape = [self.zone_ids[(0, 0)].shape, None, self.zone_ids[(2, 0)].shape, self.zone_ids[(3, 0)].shape]
-        shape[1] = _pool(self.fine_h, VOID, ks[1]).shape
+        shape = [self.zone_ids[(0, 0)].shape, _pool(self.fine_h, VOID, ks[1]).shape,
+                 self.zone_ids[(2, 0)].shape, self.zone_ids[(3, 0)].shape]
         chans = (5, 3, 2, 2)  # res 1: h, t, items, archive, goal; res 2: h, t, items; 4/16: zones
-        self.stacks = [np.zeros((num_racers, c, *sh), np.float32) for c, sh in zip(chans, shape, strict=True)]
-        self.windows = [sliding_window_view(st, (GRID, GRID), axis=(2, 3)) for st in self.stacks]
-        self.max_idx = np.array([[w.shape[2] - 1 for w in self.windows], [w.shape[3] - 1 for w in self.windows]])
-        self.rows = np.arange(num_racers)
+        # All layers live in one flat buffer so that one gather builds every grid channel.
+        sizes = [num_racers * c * sh[0] * sh[1] for c, sh in zip(chans, shape, strict=True)]
+        self.buf = np.zeros(sum(sizes), np.float32)
+        offs = np.cumsum([0, *sizes])
+        self.stacks = [self.buf[o : o + sz].reshape(num_racers, c, *sh)
+                       for o, sz, c, sh in zip(offs[:-1], sizes, chans, shape, strict=True)]
+        ny = np.array([sh[1] for sh in shape])
+        self.max_ix = np.array([sh[0] - GRID for sh in shape])[:, None]
+        self.max_iy = (ny - GRID)[:, None]
+        self.lay_ny = ny[:, None]
+        out = [(0, 0), (0, 1), (1, 0), (1, 1), (0, 2), (1, 2), (0, 3), (2, 0), (3, 0), (0, 4), (2, 1), (3, 1)]
+        self.layer_of = np.array([lay for lay, _ in out])
+        cell = np.arange(GRID)
+        self.base = np.stack([offs[lay] + ch * shape[lay][0] * shape[lay][1] + cell[:, None] * ny[lay] + cell[None]
+                              for lay, ch in out])  # (12, 16, 16)
+        stride = np.array([chans[lay] * shape[lay][0] * shape[lay][1] for lay, _ in out])
+        self.racer_shift = (stride[:, None] * np.arange(num_racers)[None])  # (12, N)
+        self.ox = self.origin[0][:, None]
+        self.oy = self.origin[1][:, None]
+        self.inv = self.inv_res[:, None]
         self._fill_terrain()
         self.archive_state = np.zeros((num_racers, self.n_archives + 1), np.float32)
         self.goal_state = np.zeros((num_racers, len(goals_list := list(course.goals)) + 2), np.float32)
@@ -138,6 +160,7 @@ class CourseGrids:
             self._put(sx, sy, b.cz + b.hz, code)
             if b.kind == "conveyor":
                 self.items[sx, sy] = it["conveyor"] / 6.0
+                self.belt_x[sx, sy], self.belt_y[sx, sy] = b.belt
         for tr in c.trampolines:
             sx, sy = self._span(tr.cx, tr.cy, tr.hx, tr.hy)
             self.static_t[sx, sy] = tt["trampoline"] / 8.0
@@ -216,21 +239,19 @@ class CourseGrids:
     def observe(
         self, x: np.ndarray, y: np.ndarray, feet: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Batched grids for N racers: terrain (N,4,16,16), items (N,2,..), targets, goals (N,3,..)."""
-        xy = np.stack((x, y))  # (2, N)
-        idx = ((xy[:, None, :] - self.origin[:, :, None]) * self.inv_res[None, :, None]).astype(np.intp)
-        idx -= HALF
-        np.clip(idx, 0, self.max_idx[:, :, None], out=idx)  # (2, 4, N)
-        rows = self.rows
-        g1 = self.windows[0][rows, :, idx[0, 0], idx[1, 0]]  # (N, 5, 16, 16)
-        g2 = self.windows[1][rows, :, idx[0, 1], idx[1, 1]]
-        g4 = self.windows[2][rows, :, idx[0, 2], idx[1, 2]]
-        g16 = self.windows[3][rows, :, idx[0, 3], idx[1, 3]]
-        terrain = np.concatenate((g1[:, :2], g2[:, :2]), axis=1)
-        hts = terrain[:, 0::2]
+        """Batched grids for N racers: terrain (N,4,16,16), items (N,2,..), targets, goals (N,3,..).
+
+        One gather from the flat buffer builds all twelve channels; the four arrays are views.
+        """
+        ix = ((x[None] - self.ox) * self.inv).astype(np.intp)
+        iy = ((y[None] - self.oy) * self.inv).astype(np.intp)
+        ix -= HALF
+        iy -= HALF
+        _clip(ix, 0, self.max_ix, out=ix)
+        _clip(iy, 0, self.max_iy, out=iy)
+        shift = (ix * self.lay_ny + iy)[self.layer_of] + self.racer_shift  # (12, N)
+        out = self.buf[self.base[None] + shift.T[:, :, None, None]]  # (N, 12, 16, 16)
+        hts = out[:, 0:4:2]
         hts -= (feet * 0.2)[:, None, None, None]
-        np.clip(hts, -1.0, 1.0, out=hts)
-        items = np.concatenate((g1[:, 2:3], g2[:, 2:3]), axis=1)
-        targets = np.concatenate((g1[:, 3:4], g4[:, 0:1], g16[:, 0:1]), axis=1)
-        goals = np.concatenate((g1[:, 4:5], g4[:, 1:2], g16[:, 1:2]), axis=1)
-        return terrain, items, targets, goals
+        _clip(hts, -1.0, 1.0, out=hts)
+        return out[:, 0:4], out[:, 4:6], out[:, 6:9], out[:, 9:12]

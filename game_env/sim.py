@@ -1,7 +1,10 @@
-"""The race simulator: N racers in one MuJoCo scene, batched controls, rules and observations.
+"""The race simulator: N racers in one MuJoCo scene, controls, rules and observations.
 
-``RaceSim`` is shared by the Gymnasium env (N = 1) and the PettingZoo env (N racers). It knows
-nothing about either API: it takes an (N, 8) action array and returns arrays.
+``RaceSim`` is shared by the Gymnasium env (N = 1) and the PettingZoo env (N racers); it knows
+neither API: ``step`` takes an (N, 8) int action array. Speed notes: per-racer rules are plain
+float math (numpy on 1-8 element arrays costs more than it saves); everything grid-shaped is
+batched across racers with numpy; contacts are read once per env step, and only where they
+matter (several racers, balloons); floors, belts and tiles are looked up in the course maps.
 """
 
 from __future__ import annotations
@@ -11,7 +14,6 @@ import math
 import mujoco
 import numpy as np
 
-from game_env import mechanics
 from game_env.constants import (
     ATTACK_KNOCK,
     ATTACK_RANGE,
@@ -25,20 +27,54 @@ from game_env.constants import (
     RUN_SPEED,
     SPRINT_SPEED,
 )
-from game_env.grids import VOID, CourseGrids
+from game_env.grids import FINE, VOID, CourseGrids, _clip
+from game_env.mechanics import DECEL, Balloons, Hammers, Tiles, Trampolines, knock_speed
 from game_env.scene import load_scene, spawn_offsets
-from game_env.spaces import REWARD_TERMS
 
 STAY_S = 2.0  # stationary this long (moved < STAY_DIST) -> stay penalty
 STAY_DIST = 0.5
 TRAPPED_S = 10.0  # no new best progress this long -> trapped
 WALL_STEPS = 25  # env steps pressing into a wall -> wall penalty
 DECAY = 0.05  # goal-distance shaping: potential exp(-DECAY * distance)
-REWARDS = {"arrive_target": 1.0, "arrive_goal": 0.3, "arrive_destination": 1.0, "fall_or_wall": -1.0,
-           "stay": -0.01, "time": -0.02}
-_BAD = [int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
-        int(mujoco.mjtWarning.mjWARN_BADQACC)]
-_DIRS = np.array([[math.cos(k * math.pi / 4), math.sin(k * math.pi / 4)] for k in range(8)])
+R_TARGET, R_GOAL, R_DEST, R_FALL, R_STAY, R_TIME = 1.0, 0.3, 1.0, -1.0, -0.01, -0.02
+_BAD = (int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
+        int(mujoco.mjtWarning.mjWARN_BADQACC))
+_DIRS = [(math.cos(k * math.pi / 4), math.sin(k * math.pi / 4)) for k in range(8)]
+_S2 = math.sqrt(0.5)
+
+
+class Racer:
+    """Per-racer state (plain Python floats for speed)."""
+
+    __slots__ = (
+        "active", "success", "yaw", "grounded", "belt", "launched", "carry", "knock_t0", "knock_until",
+        "knock_v0", "knock_dir", "dash_until", "dash_vel", "ready_t", "prop", "sprint", "last_archive",
+        "arch_reached", "goal_reached", "next_goal", "anchor", "anchor_t", "best_x", "best_t", "wall",
+        "in_jump", "jump_z0", "jump_t0", "jump_needed", "jumps", "useless_jumps", "trapped",
+        "cliff_sum", "cliff_cnt", "goal_reward", "total_reward", "length", "potential", "on_tile",
+        "on_pad", "move", "speed",
+    )
+
+    def __init__(self, n_arch: int, n_goals: int, x: float, y: float) -> None:
+        self.active, self.success, self.yaw, self.grounded = True, False, 0.0, True
+        self.belt, self.launched, self.carry = (0.0, 0.0), False, (0.0, 0.0)
+        self.knock_t0 = self.knock_until = self.knock_v0 = 0.0
+        self.knock_dir = (0.0, 0.0)
+        self.dash_until, self.dash_vel, self.ready_t = 0.0, (0.0, 0.0), 0.0
+        self.prop = self.sprint = False
+        self.last_archive = n_arch  # index into arch_pos: n_arch = the start
+        self.arch_reached = [False] * n_arch
+        self.goal_reached = [False] * n_goals
+        self.next_goal = 0
+        self.anchor, self.anchor_t, self.best_x, self.best_t = (x, y), 0.0, x, 0.0
+        self.wall, self.in_jump, self.jump_z0, self.jump_t0, self.jump_needed = 0, False, 0.0, 0.0, False
+        self.jumps = self.useless_jumps = 0
+        self.trapped = False
+        self.cliff_sum = self.goal_reward = self.total_reward = 0.0
+        self.cliff_cnt = self.length = 0
+        self.potential = 0.0
+        self.on_tile = self.on_pad = False
+        self.move, self.speed = (0.0, 0.0), RUN_SPEED
 
 
 class RaceSim:
@@ -60,40 +96,40 @@ class RaceSim:
         course, model, idx = load_scene(map_id, course_seed, self.n)
         self.course, self.model, self.idx = course, model, idx
         self.data = mujoco.MjData(model)
-        self.grids = CourseGrids(course, self.n)
-        ng = model.ngeom
-        self.hammers = mechanics.Hammers(course, idx)
-        self.tramps = mechanics.Trampolines(course)
-        self.tiles = mechanics.Tiles(course, idx, self.grids, ng)
-        self.balloons = mechanics.Balloons(course, model, idx)
-        self.belt = np.zeros((ng + 1, 2))
-        self.belt[:ng] = idx.geom_belt
-        self.geom2racer = np.full(ng + 1, -1, np.intp)
+        self.grids = g = CourseGrids(course, self.n)
+        self.hammers = Hammers(course, idx)
+        self.tramps = Trampolines(course)
+        self.tiles = Tiles(course, idx, g)
+        self.balloons = Balloons(course, model, idx)
+        self.need_contacts = self.n > 1 or self.balloons.n > 0
+        self.geom2racer = np.full(model.ngeom + 1, -1, np.intp)
         self.geom2racer[idx.racer_geom] = np.arange(self.n)
         self.qpos_i = idx.racer_qpos
         self.qvel_i = idx.racer_qvel
+        self.qpos_flat = idx.racer_qpos.ravel()
+        self.qvel_flat = idx.racer_qvel.ravel()
+        self.vz_adr = [int(a) for a in idx.racer_qvel[:, 2]]
+        self.vxy_adr = [(int(a), int(b)) for a, b in idx.racer_qvel[:, :2]]
         self.ctrl_i = idx.racer_ctrl.ravel()
-        self.offsets = np.concatenate([spawn_offsets(self.n), np.zeros((self.n, 1))], axis=1)
+        self.offsets = spawn_offsets(self.n).tolist()
         c = course
-        self.arch_lo, self.arch_hi = _zone_boxes(c.archives)
-        self.goal_lo, self.goal_hi = _zone_boxes(c.goals)
+        self.archives = [(z.cx - z.hx, z.cx + z.hx, z.cy - z.hy, z.cy + z.hy, z.z) for z in c.archives]
+        self.goals = [(z.cx - z.hx, z.cx + z.hx, z.cy - z.hy, z.cy + z.hy, z.z) for z in c.goals]
         d = c.destination
-        self.dest = np.array([d.cx, d.cy, d.z])
-        self.dest_rot = np.array([[math.cos(d.yaw), math.sin(d.yaw)], [-math.sin(d.yaw), math.cos(d.yaw)]])
-        self.dest_half = np.array([d.hx, d.hy])
-        self.goal_pos = np.array([[z.cx, z.cy, z.z + FEET] for z in [*c.goals, d]])
-        self.arch_pos = np.array([[z.cx, z.cy, z.z + FEET] for z in c.archives] + [[*c.start[:2], c.start[2] + FEET]])
+        self.dest = (d.cx, d.cy, d.z, math.cos(d.yaw), math.sin(d.yaw), d.hx, d.hy)
+        self.goal_pos = [(z.cx, z.cy, z.z + FEET) for z in [*c.goals, d]]
+        self.arch_pos = [(z.cx, z.cy, z.z + FEET) for z in c.archives] + [(c.start[0], c.start[1], c.start[2] + FEET)]
         self.fall_z = c.floor_min - FALL_DEPTH
         self.inv_len = 2.0 / c.length
-        self.dest_vec = np.array([0, 0, 0, math.sin(d.yaw), math.cos(d.yaw), 0.0, d.hx / 10, d.hy / 10, 0.003],
-                                 np.float32)
+        self.dest_static = [math.sin(d.yaw), math.cos(d.yaw), 0.0, d.hx / 10, d.hy / 10, 0.003]
+        self.props = list(c.props)
+        self.maps = (g.fine_h, g.belt_x, g.belt_y, g.tile_id, g.cliff)
+        self.fine = (g.x_min, g.y_min, 1.0 / FINE, g.nx - 1, g.ny - 1)
 
     # --- episode -----------------------------------------------------------------------
     def reset(self) -> dict[str, np.ndarray]:
         """Racers back on the start pad, hazards back to their initial state."""
-        n = self.n
         mujoco.mj_resetData(self.model, self.data)
-        self.model.opt.disableactuator = 0
         self.tiles.reset()
         self.grids.reset_tiles()
         self.grids.reset_zones()
@@ -101,43 +137,16 @@ class RaceSim:
         self.hammers.pose(self.data, 0.0)
         mujoco.mj_forward(self.model, self.data)
         self.steps = 0
-        self.active = np.ones(n, bool)
-        self.success = np.zeros(n, bool)
-        self.yaw = np.zeros(n)
-        self.grounded = np.ones(n, bool)
-        self.support = np.full(n, -1, np.intp)
-        self.launched = np.zeros(n, bool)
-        self.carry = np.zeros((n, 2))
-        self.knocked_until = np.zeros(n)
-        self.dash_until = np.zeros(n)
-        self.dash_vel = np.zeros((n, 2))
-        self.ready_t = np.zeros(n)
-        self.prop = np.zeros(n, bool)
-        self.sprint = np.zeros(n, bool)
-        self.last_archive = np.full(n, len(self.course.archives))  # index into arch_pos (start)
-        self.arch_reached = np.zeros((n, len(self.course.archives)), bool)
-        self.goal_reached = np.zeros((n, len(self.course.goals)), bool)
-        self.anchor = self.pos[:, :2].copy()
-        self.anchor_t = np.zeros(n)
-        self.best_x = self.pos[:, 0].copy()
-        self.best_t = np.zeros(n)
-        self.wall = np.zeros(n, np.intp)
-        self.in_jump = np.zeros(n, bool)
-        self.jump_z0 = np.zeros(n)
-        self.jump_t0 = np.zeros(n)
-        self.jump_needed = np.zeros(n, bool)
-        self.jumps = np.zeros(n, np.intp)
-        self.useless_jumps = np.zeros(n, np.intp)
-        self.trapped = np.zeros(n, bool)
-        self.cliff_sum = np.zeros(n)
-        self.cliff_cnt = np.zeros(n)
-        self.goal_reward = np.zeros(n)
-        self.total_reward = np.zeros(n)
-        self.length = np.zeros(n, np.intp)
-        self.next_goal = np.zeros(n, np.intp)
-        self.potential = np.exp(-DECAY * self._goal_dist(self.pos))
+        pos = self.data.qpos[self.qpos_flat].tolist()
+        c = self.course
+        self.racers = [Racer(len(c.archives), len(c.goals), pos[3 * i], pos[3 * i + 1]) for i in range(self.n)]
+        for i, r in enumerate(self.racers):
+            gx, gy, gz = self.goal_pos[0]
+            r.potential = math.exp(-DECAY * math.dist((gx, gy, gz), pos[3 * i: 3 * i + 3]))
         self._warn = self._bad_count()
-        return self.observe()
+        self.last_pos = pos
+        self._agent_rows = [None] * self.n
+        return self._observe(pos, self.data.qvel[self.qvel_flat].tolist(), [self._floor(pos, i)[0] for i in range(self.n)])
 
     @property
     def pos(self) -> np.ndarray:
@@ -148,313 +157,305 @@ class RaceSim:
     def vel(self) -> np.ndarray:
         return self.data.qvel[self.qvel_i]
 
-    def _bad_count(self) -> int:
-        return int(self.data.warning.number[_BAD].sum())
+    @property
+    def success(self) -> np.ndarray:
+        return np.array([r.success for r in self.racers])
 
-    def _goal_dist(self, pos: np.ndarray) -> np.ndarray:
-        return np.linalg.norm(self.goal_pos[self.next_goal] - pos, axis=1)
+    def _bad_count(self) -> int:
+        w = self.data.warning.number
+        return int(w[_BAD[0]] + w[_BAD[1]] + w[_BAD[2]])
+
+    def _floor(self, pos: list[float], i: int) -> tuple[float, int, int]:
+        x0, y0, inv, mx, my = self.fine
+        ix = min(max(int((pos[3 * i] - x0) * inv), 0), mx)
+        iy = min(max(int((pos[3 * i + 1] - y0) * inv), 0), my)
+        return float(self.maps[0][ix, iy]), ix, iy
 
     # --- one env step ------------------------------------------------------------------
-    def step(self, actions: np.ndarray) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, str | None]:
-        """Advance one env step. Returns (obs, terms (7, N), done (N,), physics error or None).
+    def step(self, actions: np.ndarray) -> tuple[dict[str, np.ndarray], list[list[float]], list[bool], str | None]:
+        """Advance one env step with (N, 8) actions.
 
-        ``done`` marks racers that reached the destination this step; time limits are the
-        caller's business (``self.steps`` counts env steps).
+        Returns (batched obs, reward terms per racer (N lists of 7 floats in
+        ``spaces.REWARD_TERMS`` order), done per racer (reached the destination this step),
+        physics error message or None). Time limits are the caller's (``self.steps``).
         """
-        data, n = self.data, self.n
+        data = self.data
         t0 = data.time
-        act = self.active
-        a = actions
-        move = (a[:, :2] - 1).astype(float)
-        move[a[:, 7] == 1] = 0.0
-        norm = np.hypot(move[:, 0], move[:, 1])
-        moving = norm > 0
-        move /= np.maximum(norm, 1.0)[:, None]
-        self.sprint = (a[:, 3] == 1) & moving
-        speed = np.where(self.sprint, SPRINT_SPEED, RUN_SPEED)
-        if moving.any():
-            self.yaw = np.where(moving, np.arctan2(move[:, 1], move[:, 0]), self.yaw)
-        knocked = t0 < self.knocked_until
-        ready = (t0 >= self.ready_t) & act & ~knocked
-        ref = np.where(self.grounded[:, None], self.belt[self.support],
-                       np.where(self.launched[:, None], self.carry, 0.0))
-        target = ref + move * speed[:, None]
-        dash = (a[:, 5] == 1) & self.prop & ready
-        if dash.any():
-            self.dash_vel[dash] = DASH_SPEED * _DIRS[a[dash, 6]]
-            self.dash_until[dash] = t0 + DASH_TIME
-            self.prop[dash] = False
-            self.ready_t[dash] = t0 + COOLDOWN
-        dashing = t0 < self.dash_until
-        if dashing.any():
-            target[dashing] = self.dash_vel[dashing]
-        target[~act] = 0.0
-        data.ctrl[self.ctrl_i] = target.ravel()
-        vel_i = self.qvel_i
-        jump = (a[:, 2] == 1) & self.grounded & ready
-        if jump.any():
-            data.qvel[vel_i[jump, 2]] = JUMP_SPEED
-            self.grounded[jump] = False
-            self.ready_t[jump] = t0 + COOLDOWN
-            self.jumps[jump] += 1
-            self.in_jump |= jump
-            self.jump_z0[jump] = self.pos[jump, 2]
-            self.jump_t0[jump] = t0
-            self.jump_needed[jump] = False
-        if n > 1:
-            self._attack((a[:, 4] == 1) & ready, t0)
-        knocked = t0 < self.knocked_until
-        self.model.opt.disableactuator = int((np.left_shift(1, np.arange(n)) * (knocked | ~act)).sum()) if (
-            knocked.any() or not act.all()) else 0
-        self.hammers.pose(data, t0 + 0.5 * self.frame_skip * self.model.opt.timestep)
+        half = 0.5 * self.frame_skip * self.model.opt.timestep
+        qvel = data.qvel
+        ctrl = []
+        for i, (r, a) in enumerate(zip(self.racers, actions.tolist(), strict=True)):
+            if not r.active:
+                ctrl += (0.0, 0.0)
+                continue
+            mx, my = (0, 0) if a[7] else (a[0] - 1, a[1] - 1)
+            if mx or my:
+                s = _S2 if mx and my else 1.0
+                dx, dy = mx * s, my * s
+                r.yaw = math.atan2(my, mx)
+                r.sprint = a[3] == 1
+            else:
+                dx = dy = 0.0
+                r.sprint = False
+            spd = SPRINT_SPEED if r.sprint else RUN_SPEED
+            r.move, r.speed = (dx, dy), spd
+            knocked = t0 < r.knock_until
+            ready = t0 >= r.ready_t and not knocked
+            if ready and a[5] and r.prop:
+                ux, uy = _DIRS[a[6]]
+                r.dash_vel, r.dash_until, r.prop, r.ready_t = (DASH_SPEED * ux, DASH_SPEED * uy), t0 + DASH_TIME, False, t0 + COOLDOWN
+            if knocked:  # slide with emulated friction (the racer's contacts are frictionless)
+                v = max(r.knock_v0 - DECEL * (t0 + half - r.knock_t0), 0.0)
+                tx, ty = r.knock_dir[0] * v, r.knock_dir[1] * v
+            elif t0 < r.dash_until:
+                tx, ty = r.dash_vel
+            else:
+                bx, by = r.belt if r.grounded else (r.carry if r.launched else (0.0, 0.0))
+                tx, ty = bx + dx * spd, by + dy * spd
+            if ready and a[2] and r.grounded:
+                qvel[self.vz_adr[i]] = JUMP_SPEED
+                r.grounded, r.ready_t, r.in_jump, r.jump_needed = False, t0 + COOLDOWN, True, False
+                r.jumps += 1
+                r.jump_z0, r.jump_t0 = self.last_pos[3 * i + 2], t0
+            if ready and a[4] and self.n > 1:
+                self._attack(i, t0)
+            ctrl += (tx, ty)
+        data.ctrl[:] = ctrl  # actuators are (racer0 x, racer0 y, racer1 x, ...)
+        if self.hammers.n:
+            self.hammers.pose(data, t0 + half)
         mujoco.mj_step(self.model, data, nstep=self.frame_skip)
         self.steps += 1
-        if self._bad_count() != self._warn or not np.isfinite(data.qpos).all():
-            return self.observe(), np.zeros((len(REWARD_TERMS), n)), np.zeros(n, bool), (
-                f"MuJoCo physics became unstable at t={data.time:.3f}s (bad qpos/qvel/qacc)")
-        return self._after_physics(move, speed, t0, data.time)
+        if self._bad_count() != self._warn:
+            self._warn = self._bad_count()
+            pos = data.qpos[self.qpos_flat].tolist()
+            return (self._observe(pos, [0.0] * (3 * self.n), [VOID] * self.n), [[0.0] * 7 for _ in self.racers],
+                    [False] * self.n, f"MuJoCo physics became unstable at t={data.time:.3f}s (bad qpos/qvel/qacc)")
+        return self._after_physics(t0, data.time)
 
-    def _attack(self, attack: np.ndarray, t: float) -> None:
-        if not attack.any():
-            return
-        pos = self.pos[:, :2]
-        for i in np.flatnonzero(attack):
-            rel = pos - pos[i]
-            dist = np.hypot(rel[:, 0], rel[:, 1])
-            victims = (dist < ATTACK_RANGE) & (dist > 1e-6) & self.active
-            victims[i] = False
-            for j in np.flatnonzero(victims):
-                self.knock(j, rel[j] / dist[j], ATTACK_KNOCK, t)
-            self.ready_t[i] = t + COOLDOWN
+    def _attack(self, i: int, t: float) -> None:
+        pos = self.last_pos
+        xi, yi = pos[3 * i], pos[3 * i + 1]
+        for j, other in enumerate(self.racers):
+            if j == i or not other.active:
+                continue
+            dx, dy = pos[3 * j] - xi, pos[3 * j + 1] - yi
+            dist = math.hypot(dx, dy)
+            if 1e-6 < dist < ATTACK_RANGE:
+                self.knock(j, dx / dist, dy / dist, ATTACK_KNOCK, t)
+        self.racers[i].ready_t = t + COOLDOWN
 
-    def knock(self, i: int | np.ndarray, direction: np.ndarray, distance, t: float) -> None:
-        """Knock racer(s) ``i`` back along unit ``direction`` so they slide ``distance`` m."""
-        v0 = mechanics.knock_speed(distance)
-        d = np.asarray(direction)
-        self.data.qvel[self.qvel_i[i, 0]] = v0 * d[..., 0]
-        self.data.qvel[self.qvel_i[i, 1]] = v0 * d[..., 1]
-        self.knocked_until[i] = t + mechanics.knock_duration(distance)
-        self.dash_until[i] = 0.0
-        self.launched[i] = False
+    def knock(self, i: int, dx: float, dy: float, distance: float, t: float) -> None:
+        """Knock racer ``i`` back along unit (dx, dy) so that it slides ``distance`` m."""
+        r = self.racers[i]
+        v0 = knock_speed(distance)
+        r.knock_t0, r.knock_v0, r.knock_dir = t, v0, (dx, dy)
+        r.knock_until = t + v0 / DECEL + 0.05
+        r.dash_until, r.launched = 0.0, False
+        ax, ay = self.vxy_adr[i]
+        self.data.qvel[ax], self.data.qvel[ay] = v0 * dx, v0 * dy
 
-    def _contacts(self) -> np.ndarray:
-        """Read contacts once: set ``grounded``/``support``; return geoms racers touched."""
+    def _contacts(self) -> tuple[list[bool], np.ndarray]:
+        """Read contacts once: racers supported by another body, and geoms racers touched."""
         data = self.data
-        self.support[:] = -1
         nc = data.ncon
+        supported = [False] * self.n
         if not nc:
-            self.grounded[:] = False
-            return np.zeros(0, np.intp)
+            return supported, np.zeros(0, np.intp)
         con = data.contact
         g = con.geom[:nc]
         nz = con.frame[:nc, 2]
         r0, r1 = self.geom2racer[g[:, 0]], self.geom2racer[g[:, 1]]
-        m0 = (r0 >= 0) & (nz < -0.5)
-        m1 = (r1 >= 0) & (nz > 0.5)
-        self.support[r0[m0]] = g[m0, 1]
-        self.support[r1[m1]] = g[m1, 0]
-        self.grounded = self.support >= 0
-        touched = np.concatenate((g[r0 >= 0, 1], g[r1 >= 0, 0]))
-        return touched
+        for i in r0[(r0 >= 0) & (nz < -0.5)].tolist() + r1[(r1 >= 0) & (nz > 0.5)].tolist():
+            supported[i] = True
+        return supported, np.concatenate((g[r0 >= 0, 1], g[r1 >= 0, 0]))
 
-    def _after_physics(self, move, speed, t0, t1):
-        n = self.n
-        terms = np.zeros((len(REWARD_TERMS), n))
-        act = self.active
-        touched = self._contacts()
-        self.balloons.touch(touched)
-        self.tiles.update(self.data, self.support, t1)
-        pos = self.pos
-        vel_i = self.qvel_i
-        # Landing ends a trampoline flight; pads launch grounded racers.
-        self.launched &= ~self.grounded
-        on_pad, pad = self.tramps.on_pad(pos)
-        launch = on_pad & self.grounded & act & (self.vel[:, 2] < 0.5)
-        if launch.any():
-            v = self.tramps.vel[pad[launch]]
-            self.data.qvel[vel_i[launch, 2]] = v[:, 2]
-            self.data.qvel[vel_i[launch, 0]] = v[:, 0]
-            self.carry[launch] = v[:, :2]
-            self.launched |= launch
-            self.grounded[launch] = False
-            self.jump_needed[launch] = True
-        hit, direction, dist = self.hammers.hits(pos, t0, t1)
-        hit &= act & (t1 >= self.knocked_until)
-        if hit.any():
-            self.knock(np.flatnonzero(hit), direction[hit], dist[hit], t1)
-        # Falls: respawn at the last archive point.
-        fell = (pos[:, 2] < self.fall_z) & act
-        if fell.any():
-            terms[4, fell] += REWARDS["fall_or_wall"]
-            self._respawn(np.flatnonzero(fell), t1)
-            pos = self.pos
-        x, y = pos[:, 0], pos[:, 1]
-        feet = pos[:, 2] - FEET
-        floor = self.grids.floor_height(x, y)
-        # Jumps: necessary if they crossed void, climbed or cleared a hammer.
-        if self.in_jump.any():
-            self.jump_needed |= self.in_jump & ((floor < VOID / 2) | self.hammers.inside(pos))
-            land = self.in_jump & self.grounded & (t1 - self.jump_t0 > 0.1)
-            if land.any():
-                needed = self.jump_needed | (pos[:, 2] > self.jump_z0 + 0.3)
-                self.useless_jumps += land & ~needed
-                self.in_jump &= ~land
-        # Zones.
-        goal_before = self.next_goal.copy()
-        self._zones(pos, feet, terms)
-        # Shaping towards the goal that was next at the start of the step.
-        d = np.linalg.norm(self.goal_pos[goal_before] - pos, axis=1)
-        terms[3] = np.where(act, np.exp(-DECAY * d) - self.potential, 0.0)
-        self.potential = np.exp(-DECAY * self._goal_dist(pos))
-        # Walls, staying, trapped.
-        moving = (np.abs(move).sum(1) > 0) & self.grounded & (t1 >= self.knocked_until)
-        if moving.any():
-            ahead = pos[:, :2] + 0.5 * move
-            wall_h = self.grids.floor_height(ahead[:, 0], ahead[:, 1])
-            rel_v = self.vel[:, :2] - self.belt[self.support]
-            slow = (rel_v * move).sum(1) < 0.3 * speed
-            pressing = moving & slow & (wall_h > feet + 0.35)
+    def _after_physics(self, t0: float, t1: float):
+        data = self.data
+        pos = data.qpos[self.qpos_flat].tolist()
+        vel = data.qvel[self.qvel_flat].tolist()
+        if self.need_contacts:
+            supported, touched = self._contacts()
+            self.balloons.touch(touched)
         else:
-            pressing = np.zeros(n, bool)
-        self.wall = np.where(pressing & act, self.wall + 1, 0)
-        bump = self.wall >= WALL_STEPS
-        terms[4, bump] += REWARDS["fall_or_wall"]
-        self.wall[bump] = 0
-        away = np.hypot(*(pos[:, :2] - self.anchor).T) > STAY_DIST
-        self.anchor[away] = pos[away, :2]
-        self.anchor_t[away] = t1
-        terms[5] = np.where(act & (t1 - self.anchor_t > STAY_S), REWARDS["stay"], 0.0)
-        better = x > self.best_x + 0.5
-        self.best_x[better] = x[better]
-        self.best_t[better] = t1
-        self.trapped |= act & ~self.success & (t1 - self.best_t > TRAPPED_S)
-        terms[6] = np.where(act, REWARDS["time"], 0.0)
-        cliff = self.grids.cliff_distance(x, y)
-        g = self.grounded & act
-        self.cliff_sum += np.where(g, cliff, 0.0)
-        self.cliff_cnt += g
-        # Props.
-        if self.course.props:
-            props = np.asarray(self.course.props)
-            near = (((pos[:, None, :] - props[None]) ** 2).sum(-1) < 1.0).any(1)
-            self.prop |= near & act
-        total = terms.sum(0)
-        self.total_reward += total
-        self.goal_reward += terms[:3].sum(0)
-        self.length += act
-        done = act & self.success
-        self.active = act & ~self.success
-        return self.observe(floor), terms, done, None
+            supported = None
+        fine_h, belt_x, belt_y, tile_id, cliff_map = self.maps
+        all_terms, done, floors = [], [], []
+        for i, r in enumerate(self.racers):
+            terms = [0.0] * 7
+            all_terms.append(terms)
+            if not r.active:
+                done.append(False)
+                floors.append(self._floor(pos, i)[0])
+                continue
+            x, y, z = pos[3 * i: 3 * i + 3]
+            vz = vel[3 * i + 2]
+            floor, ix, iy = self._floor(pos, i)
+            feet = z - FEET
+            near = feet - floor < 0.06 and abs(vz) < 1.5
+            grounded = near or (supported is not None and supported[i] and vz < 1.0)
+            r.grounded = grounded
+            r.on_pad = r.on_tile = False
+            if grounded:
+                r.launched = False
+                r.belt = (float(belt_x[ix, iy]), float(belt_y[ix, iy])) if near else (0.0, 0.0)
+                k = int(tile_id[ix, iy]) if near else -1
+                if k >= 0:
+                    r.on_tile = True
+                    self.tiles.touch(k, t1)
+                if self.tramps.n and vz < 0.5:
+                    p = self.tramps.pad(x, y, feet)
+                    if p >= 0:  # launch along the pad normal
+                        vx_l, vz_l = self.tramps.vel[p]
+                        ax, ay = self.vxy_adr[i]
+                        data.qvel[self.vz_adr[i]] = vz_l
+                        data.qvel[ax] = vx_l
+                        r.carry, r.launched, r.grounded, r.on_pad = (vx_l, 0.0), True, False, True
+                        r.jump_needed = True
+                        grounded = False
+            if self.hammers.n and t1 >= r.knock_until:
+                hit = self.hammers.hit(x, y, feet, t0, t1)
+                if hit is not None:
+                    self.knock(i, hit[0], hit[1], hit[2], t1)
+            if z < self.fall_z:  # fell: respawn at the last archive point
+                terms[4] += R_FALL
+                x, y, z = self._respawn(i, t1)
+                pos[3 * i: 3 * i + 3] = (x, y, z)
+                floor = self._floor(pos, i)[0]
+                feet = z - FEET
+            floors.append(floor)
+            if r.in_jump:  # necessary if it crosses void, climbs or clears a hammer
+                if floor < VOID / 2 or (self.hammers.n and self.hammers.near(x, y)):
+                    r.jump_needed = True
+                if grounded and t1 - r.jump_t0 > 0.1:
+                    if not (r.jump_needed or z > r.jump_z0 + 0.3):
+                        r.useless_jumps += 1
+                    r.in_jump = False
+            goal_before = r.next_goal
+            self._zones(r, i, x, y, feet, terms)
+            gx, gy, gz = self.goal_pos[goal_before]
+            terms[3] = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2)) - r.potential
+            gx, gy, gz = self.goal_pos[r.next_goal]
+            r.potential = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2))
+            # Pressing into a wall (a ledge higher than a step just ahead, no progress).
+            dx, dy = r.move
+            if grounded and (dx or dy) and t1 >= r.knock_until:
+                ahead = self._floor([x + 0.5 * dx, y + 0.5 * dy, 0.0], 0)[0]
+                vrel = (vel[3 * i] - r.belt[0]) * dx + (vel[3 * i + 1] - r.belt[1]) * dy
+                r.wall = r.wall + 1 if ahead > feet + 0.35 and vrel < 0.3 * r.speed else 0
+                if r.wall >= WALL_STEPS:
+                    terms[4] += R_FALL
+                    r.wall = 0
+            else:
+                r.wall = 0
+            if math.hypot(x - r.anchor[0], y - r.anchor[1]) > STAY_DIST:
+                r.anchor, r.anchor_t = (x, y), t1
+            if t1 - r.anchor_t > STAY_S:
+                terms[5] = R_STAY
+            if x > r.best_x + 0.5:
+                r.best_x, r.best_t = x, t1
+            if not r.success and t1 - r.best_t > TRAPPED_S:
+                r.trapped = True
+            terms[6] = R_TIME
+            if grounded:
+                r.cliff_sum += float(cliff_map[self._floor(pos, i)[1:]])
+                r.cliff_cnt += 1
+            if self.props and not r.prop:
+                r.prop = any((x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2 < 1.0 for px, py, pz in self.props)
+            r.total_reward += sum(terms)
+            r.goal_reward += terms[0] + terms[1] + terms[2]
+            r.length += 1
+            done.append(r.success)
+            if r.success:
+                r.active = False
+        self.tiles.update(data, t1)
+        self.last_pos = pos
+        return self._observe(pos, vel, floors), all_terms, done, None
 
-    def _zones(self, pos: np.ndarray, feet: np.ndarray, terms: np.ndarray) -> None:
-        act = self.active
-        xy = pos[:, None, :2]
-        zf = feet[:, None]
-        if self.arch_lo.shape[0]:
-            inside = ((xy >= self.arch_lo[:, :2]) & (xy <= self.arch_hi[:, :2])).all(-1)
-            inside &= (zf > self.arch_lo[:, 2]) & (zf < self.arch_hi[:, 2]) & act[:, None]
-            new = inside & ~self.arch_reached
-            if new.any():
-                for i, k in zip(*np.nonzero(new), strict=True):
-                    self.grids.mark_reached(int(i), "archive", int(k))
-                    self.last_archive[i] = k
-                self.arch_reached |= new
-                terms[0] += new.sum(1) * REWARDS["arrive_target"]
-        if self.goal_lo.shape[0]:
-            inside = ((xy >= self.goal_lo[:, :2]) & (xy <= self.goal_hi[:, :2])).all(-1)
-            inside &= (zf > self.goal_lo[:, 2]) & (zf < self.goal_hi[:, 2]) & act[:, None]
-            new = inside & ~self.goal_reached
-            if new.any():
-                for i, k in zip(*np.nonzero(new), strict=True):
-                    self.grids.mark_reached(int(i), "goal", int(k))
-                self.goal_reached |= new
-                terms[1] += new.sum(1) * REWARDS["arrive_goal"]
-                reached_all = self.goal_reached.all(1)
-                first = np.argmin(self.goal_reached, axis=1)
-                self.next_goal = np.where(reached_all, self.goal_reached.shape[1], first)
-        local = (pos[:, :2] - self.dest[:2]) @ self.dest_rot.T
-        arrive = (np.abs(local) <= self.dest_half).all(1) & (np.abs(feet - self.dest[2]) < 1.0) & act
-        if arrive.any():
-            for i in np.flatnonzero(arrive):
-                self.grids.mark_reached(int(i), "goal", len(self.course.goals))
-            self.success |= arrive
-            terms[2] += arrive * REWARDS["arrive_destination"]
+    def _zones(self, r: Racer, i: int, x: float, y: float, feet: float, terms: list[float]) -> None:
+        for k, (x0, x1, y0, y1, zz) in enumerate(self.archives):
+            if x0 <= x <= x1 and y0 <= y <= y1 and zz - 0.5 < feet < zz + 2.5 and not r.arch_reached[k]:
+                r.arch_reached[k] = True
+                r.last_archive = k
+                terms[0] += R_TARGET
+                self.grids.mark_reached(i, "archive", k)
+        for k, (x0, x1, y0, y1, zz) in enumerate(self.goals):
+            if x0 <= x <= x1 and y0 <= y <= y1 and zz - 0.5 < feet < zz + 2.5 and not r.goal_reached[k]:
+                r.goal_reached[k] = True
+                terms[1] += R_GOAL
+                self.grids.mark_reached(i, "goal", k)
+                r.next_goal = next((j for j, done in enumerate(r.goal_reached) if not done), len(self.goals))
+        cx, cy, cz, c, s, hx, hy = self.dest
+        lx, ly = (x - cx) * c + (y - cy) * s, -(x - cx) * s + (y - cy) * c
+        if abs(lx) <= hx and abs(ly) <= hy and abs(feet - cz) < 1.0:
+            r.success = True
+            terms[2] += R_DEST
+            self.grids.mark_reached(i, "goal", len(self.goals))
 
-    def _respawn(self, idx: np.ndarray, t: float) -> None:
-        spot = self.arch_pos[self.last_archive[idx]] + self.offsets[idx] * 0.5 + np.array([0, 0, 0.05])
-        self.data.qpos[self.qpos_i[idx]] = spot
-        self.data.qvel[self.qvel_i[idx]] = 0.0
-        self.knocked_until[idx] = 0.0
-        self.dash_until[idx] = 0.0
-        self.launched[idx] = False
-        self.grounded[idx] = False
-        self.in_jump[idx] = False
-        self.anchor[idx] = spot[:, :2]
-        self.anchor_t[idx] = t
-        mujoco.mj_kinematics(self.model, self.data)
+    def _respawn(self, i: int, t: float) -> tuple[float, float, float]:
+        r = self.racers[i]
+        ax, ay, az = self.arch_pos[r.last_archive]
+        ox, oy = self.offsets[i]
+        spot = (ax + 0.5 * ox, ay + 0.5 * oy, az + 0.05)
+        self.data.qpos[self.qpos_i[i]] = spot
+        self.data.qvel[self.qvel_i[i]] = 0.0
+        r.knock_until = r.dash_until = 0.0
+        r.launched = r.grounded = r.in_jump = False
+        r.anchor, r.anchor_t = spot[:2], t
+        return spot
 
     # --- observation ---------------------------------------------------------------------
-    def observe(self, floor: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def _observe(self, pos: list[float], vel: list[float], floors: list[float]) -> dict[str, np.ndarray]:
         """Batched observations: dict of (N, ...) float32 arrays (see ``game_env.spaces``)."""
-        pos, vel = self.pos, self.vel
-        x, y, z = pos[:, 0], pos[:, 1], pos[:, 2]
-        feet = z - FEET
-        if floor is None:
-            floor = self.grids.floor_height(x, y)
-        terrain, items, targets, goals = self.grids.observe(x, y, feet)
+        n = self.n
+        p = np.array(pos).reshape(n, 3)
+        terrain, items, targets, goals = self.grids.observe(p[:, 0], p[:, 1], p[:, 2] - FEET)
         t = self.data.time
-        ag = np.empty((self.n, 32), np.float32)
-        ag[:, 0] = x * self.inv_len - 1.0
-        ag[:, 1:3] = pos[:, 1:] * 0.1
-        ag[:, 3] = np.sin(self.yaw)
-        ag[:, 4] = np.cos(self.yaw)
-        ag[:, 5:8] = vel * 0.1
-        g = self.grounded
-        ag[:, 8] = g
-        ag[:, 9] = ~g & (vel[:, 2] > 0)
-        ag[:, 10] = ~g & (vel[:, 2] <= 0)
-        ag[:, 11] = t < self.knocked_until
-        belt = self.belt[self.support]
-        ag[:, 12] = g & (np.abs(belt).sum(1) > 0)
-        ag[:, 13] = self.tramps.on_pad(pos)[0] if self.tramps.n else 0.0
-        ag[:, 14] = (self.tiles.geom2tile[self.support] >= 0) if self.tiles.n else 0.0
-        ag[:, 15] = self.sprint
-        ag[:, 16:18] = belt * 0.2
-        ag[:, 18:21] = (self.arch_pos[self.last_archive] - pos) * 0.05
-        gp = self.goal_pos[self.next_goal] - pos
-        ag[:, 21:24] = gp * 0.05
-        ag[:, 24] = np.sqrt((gp * gp).sum(1)) * 0.02
-        ag[:, 25] = np.where(floor < VOID / 2, 1.0, (feet - floor) * 0.2)
-        ag[:, 26] = self.grids.cliff_distance(x, y) * 0.2
-        ag[:, 27] = self.next_goal / (self.goal_pos.shape[0] - 1) if self.goal_pos.shape[0] > 1 else 0.0
-        ag[:, 28] = self.steps / self.max_episode_steps
-        ag[:, 29] = self.prop
-        ag[:, 30] = np.maximum(self.ready_t - t, 0.0) * (1.0 / COOLDOWN)
-        ag[:, 31] = (t - self.anchor_t) * (1.0 / STAY_S)
-        np.clip(ag, -1.0, 1.0, out=ag)
-        dest = np.tile(self.dest_vec, (self.n, 1))
-        dest[:, :3] = np.clip((self.dest - pos) * 0.01, -1.0, 1.0)
-        return {"terrain": terrain, "items": items, "targets": targets, "goals": goals, "agent": ag,
+        tf = self.steps / self.max_episode_steps
+        ng = len(self.goal_pos) - 1
+        cx, cy, cz = self.dest[:3]
+        rows, dests = [], []
+        for i, r in enumerate(self.racers):
+            x, y, z = pos[3 * i: 3 * i + 3]
+            vx, vy, vz = vel[3 * i: 3 * i + 3]
+            g = r.grounded
+            ax, ay, az = self.arch_pos[r.last_archive]
+            gx, gy, gz = self.goal_pos[r.next_goal]
+            gx, gy, gz = gx - x, gy - y, gz - z
+            feet = z - FEET
+            fl = floors[i]
+            rows.append((
+                x * self.inv_len - 1.0, y * 0.1, z * 0.1, math.sin(r.yaw), math.cos(r.yaw),
+                vx * 0.1, vy * 0.1, vz * 0.1, g, not g and vz > 0, not g and vz <= 0, t < r.knock_until,
+                g and (r.belt[0] != 0.0 or r.belt[1] != 0.0), r.on_pad, r.on_tile, r.sprint,
+                r.belt[0] * 0.2, r.belt[1] * 0.2, (ax - x) * 0.05, (ay - y) * 0.05, (az - z) * 0.05,
+                gx * 0.05, gy * 0.05, gz * 0.05, math.sqrt(gx * gx + gy * gy + gz * gz) * 0.02,
+                1.0 if fl < VOID / 2 else (feet - fl) * 0.2, self._cliff(pos, i) * 0.2,
+                r.next_goal / ng if ng else 0.0, tf, r.prop, max(r.ready_t - t, 0.0) / COOLDOWN,
+                (t - r.anchor_t) / STAY_S,
+            ))
+            dests.append(((cx - x) * 0.01, (cy - y) * 0.01, (cz - feet) * 0.01, *self.dest_static))
+        agent = np.array(rows, np.float32)
+        _clip(agent, -1.0, 1.0, out=agent)
+        dest = np.array(dests, np.float32)
+        _clip(dest, -1.0, 1.0, out=dest)
+        return {"terrain": terrain, "items": items, "targets": targets, "goals": goals, "agent": agent,
                 "destination": dest}
+
+    def _cliff(self, pos: list[float], i: int) -> float:
+        _, ix, iy = self._floor(pos, i)
+        return float(self.maps[4][ix, iy])
 
     def episode_metrics(self, i: int) -> dict[str, float]:
         """Per-episode metrics of racer ``i`` (the paper's table)."""
-        jumps = int(self.jumps[i])
+        r = self.racers[i]
         return {
-            "success": float(self.success[i]),
-            "trapped": float(self.trapped[i] and not self.success[i]),
-            "unnecessary_jumps": float(self.useless_jumps[i]),
-            "jumps": float(jumps),
-            "unnecessary_jump_rate": float(self.useless_jumps[i] / jumps) if jumps else 0.0,
-            "distance_from_cliff": float(self.cliff_sum[i] / self.cliff_cnt[i]) if self.cliff_cnt[i] else 0.0,
-            "goal_reward": float(self.goal_reward[i]),
-            "total_reward": float(self.total_reward[i]),
-            "episode_length": float(self.length[i]),
+            "success": float(r.success),
+            "trapped": float(r.trapped and not r.success),
+            "unnecessary_jumps": float(r.useless_jumps),
+            "jumps": float(r.jumps),
+            "unnecessary_jump_rate": r.useless_jumps / r.jumps if r.jumps else 0.0,
+            "distance_from_cliff": r.cliff_sum / r.cliff_cnt if r.cliff_cnt else 0.0,
+            "goal_reward": r.goal_reward,
+            "total_reward": r.total_reward,
+            "episode_length": float(r.length),
         }
-
-
-def _zone_boxes(zones) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 3) lower/upper corners of zone regions: footprint, feet from z-0.5 to z+2.5."""
-    lo = np.array([[z.cx - z.hx, z.cy - z.hy, z.z - 0.5] for z in zones]).reshape(-1, 3)
-    hi = np.array([[z.cx + z.hx, z.cy + z.hy, z.z + 2.5] for z in zones]).reshape(-1, 3)
-    return lo, hi

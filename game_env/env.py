@@ -1,0 +1,132 @@
+"""Gymnasium env ``game_env/ObstacleRace-v0``: one racer on a procedurally generated course."""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+
+from game_env.constants import FRAME_SKIP
+from game_env.maps import NUM_MAPS
+from game_env.options import (
+    COURSE_SEEDS,
+    check_action,
+    check_course_seed,
+    check_map_choice,
+    check_positive_int,
+    check_render_mode,
+    check_reset_options,
+)
+from game_env.sim import RaceSim
+from game_env.spaces import REWARD_TERMS, action_space, observation_space
+
+
+class ObstacleRaceEnv(gym.Env):
+    """Single-racer obstacle race (see ``game_env.spaces`` for spaces, RACE.md for rules).
+
+    Args:
+        map_id: 0..9, or None / "random" to draw a map per reset from the env's RNG.
+        course_seed: fixed course seed, or None to draw one (0..999) per reset.
+        max_episode_steps: env steps before truncation (a Gymnasium ``TimeLimit`` given to
+            ``gymnasium.make`` is honoured too).
+        frame_skip: MuJoCo steps per env step (timestep 2 ms).
+        render_mode: None or "rgb_array"; ``width``/``height`` size the frames.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
+
+    def __init__(
+        self,
+        map_id: int | str | None = 0,
+        course_seed: int | None = None,
+        max_episode_steps: int = 1000,
+        frame_skip: int = FRAME_SKIP,
+        render_mode: str | None = None,
+        width: int = 320,
+        height: int = 240,
+    ) -> None:
+        self._map_choice = check_map_choice(map_id)
+        self._course_seed = check_course_seed(course_seed)
+        self.frame_skip = check_positive_int("frame_skip", frame_skip, 1, 1000)
+        self._max_steps = check_positive_int("max_episode_steps", max_episode_steps)
+        self.render_mode = check_render_mode(render_mode)
+        self.width = check_positive_int("width", width, 16, 4096)
+        self.height = check_positive_int("height", height, 16, 4096)
+        self.observation_space = observation_space()
+        self.action_space = action_space()
+        self.sim = RaceSim(1, self.frame_skip, self._max_steps)
+        self._renderer = None
+        first = 0 if self._map_choice is None else self._map_choice
+        self.sim.load(first, 0 if self._course_seed is None else self._course_seed)
+        self.sim.reset()
+        self._done = False
+
+    @property
+    def model(self) -> mujoco.MjModel:
+        """The MuJoCo model of the current course."""
+        return self.sim.model
+
+    @property
+    def data(self) -> mujoco.MjData:
+        return self.sim.data
+
+    @property
+    def map_id(self) -> int:
+        return self.sim.map_id
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode; ``options`` may fix ``map_id`` and/or ``course_seed`` for it."""
+        super().reset(seed=seed)
+        opts = check_reset_options(options)
+        map_id = opts.get("map_id", self._map_choice)
+        if map_id is None:
+            map_id = int(self.np_random.integers(NUM_MAPS))
+        cseed = opts.get("course_seed", self._course_seed)
+        if cseed is None:
+            cseed = int(self.np_random.integers(COURSE_SEEDS))
+        limit = self.spec.max_episode_steps if self.spec is not None and self.spec.max_episode_steps else None
+        self.sim.max_episode_steps = limit or self._max_steps
+        old = self.sim.model
+        self.sim.load(map_id, cseed)
+        if self._renderer is not None and self.sim.model is not old:
+            self._renderer.close()
+            self._renderer = None
+        obs = self.sim.reset()
+        self._done = False
+        return {k: v[0] for k, v in obs.items()}, {"map_id": map_id, "course_seed": cseed}
+
+    def step(self, action):
+        a = check_action(action)[None]
+        sim = self.sim
+        obs, terms, done, err = sim.step(a)
+        tl = terms[0]
+        info: dict[str, Any] = {"reward_terms": dict(zip(REWARD_TERMS, tl, strict=True)),
+                                "map_id": sim.map_id, "course_seed": sim.course_seed}
+        reward = sum(tl)
+        terminated = bool(done[0])
+        truncated = sim.steps >= sim.max_episode_steps
+        if err is not None:
+            warnings.warn(err, RuntimeWarning, stacklevel=2)
+            info["physics_error"] = err
+            truncated = True
+        if terminated or truncated:
+            info["episode_metrics"] = sim.episode_metrics(0)
+        return {k: v[0] for k, v in obs.items()}, reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        """An RGB frame (H, W, 3) chasing the racer, when ``render_mode="rgb_array"``."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            from game_env.render import RaceRenderer
+
+            self._renderer = RaceRenderer(self.sim.model, self.width, self.height)
+        return self._renderer.chase(self.sim.data, self.sim.pos[0])
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,79 @@
+"""Validation of env arguments and actions (bad input -> ValueError naming value and range)."""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import numpy as np
+
+from game_env.maps import NUM_MAPS, check_map_id
+from game_env.spaces import ACTION_NVEC
+
+NVEC = np.array(ACTION_NVEC)
+COURSE_SEEDS = 1000  # course seeds drawn per reset when none is fixed
+RESET_OPTIONS = ("map_id", "course_seed")
+
+
+def check_map_choice(map_id: Any) -> int | None:
+    """An int 0..9, or None/"random" (a map drawn per reset) -> int or None."""
+    if map_id is None or map_id == "random":
+        return None
+    return check_map_id(map_id)
+
+
+def check_positive_int(name: str, value: Any, low: int = 1, high: int | None = None) -> int:
+    """Validate an int argument in [low, high]."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name}={value!r} is not valid; allowed: an int >= {low}"
+                         + (f" and <= {high}" if high is not None else ""))
+    if value < low or (high is not None and value > high):
+        rng = f"{low}..{high}" if high is not None else f">= {low}"
+        raise ValueError(f"{name}={value!r} is out of range; allowed: {rng}")
+    return int(value)
+
+
+def check_course_seed(seed: Any) -> int | None:
+    """None (a course seed drawn per reset) or an int >= 0."""
+    if seed is None:
+        return None
+    return check_positive_int("course_seed", seed, low=0)
+
+
+def check_render_mode(mode: Any) -> str | None:
+    if mode not in (None, "rgb_array"):
+        raise ValueError(f"render_mode={mode!r} is not supported; allowed: None or 'rgb_array'")
+    return mode
+
+
+def check_reset_options(options: Any) -> dict[str, Any]:
+    """``reset(options=...)``: None or a dict; ``map_id``/``course_seed`` values are validated."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ValueError(f"options={options!r} is not valid; allowed: None or a dict with keys {RESET_OPTIONS}")
+    bad = [k for k in options if k not in RESET_OPTIONS]
+    if bad:  # ignored (PettingZoo's API test passes arbitrary options), but said
+        warnings.warn(f"reset options {bad!r} are ignored; known keys: {RESET_OPTIONS}", stacklevel=3)
+    out: dict[str, Any] = {}
+    if "map_id" in options:
+        out["map_id"] = check_map_id(options["map_id"])
+    if "course_seed" in options:
+        out["course_seed"] = check_course_seed(options["course_seed"])
+    return out
+
+
+def check_action(action: Any) -> np.ndarray:
+    """One racer's action -> int64 array (8,), or ValueError naming the action."""
+    try:
+        a = np.asarray(action)
+        ok = a.shape == (8,) and a.dtype.kind in "iu" or (
+            a.shape == (8,) and a.dtype.kind == "f" and np.all(a == np.round(a)))
+    except Exception:  # noqa: BLE001 - anything unparsable is a bad action
+        ok = False
+    if not ok or not ((a >= 0) & (a < NVEC)).all():
+        raise ValueError(f"action {action!r} is outside the action space MultiDiscrete({list(ACTION_NVEC)})")
+    return a.astype(np.int64)
+
+
+__all__ = ["NUM_MAPS", "check_action", "check_map_choice"]

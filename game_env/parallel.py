@@ -1,0 +1,154 @@
+"""PettingZoo ``ParallelEnv``: N racers in one scene (they collide; Attack pushes)."""
+
+from __future__ import annotations
+
+import functools
+import warnings
+from typing import Any
+
+import numpy as np
+from gymnasium.utils import seeding
+from pettingzoo import ParallelEnv
+
+from game_env.constants import FRAME_SKIP
+from game_env.maps import NUM_MAPS
+from game_env.options import (
+    COURSE_SEEDS,
+    check_action,
+    check_course_seed,
+    check_map_choice,
+    check_positive_int,
+    check_render_mode,
+    check_reset_options,
+)
+from game_env.scene import MAX_RACERS
+from game_env.sim import RaceSim
+from game_env.spaces import REWARD_TERMS, action_space, observation_space
+
+
+class RaceParallelEnv(ParallelEnv):
+    """N racers ("racer_0", ...) race the same course; a finished racer leaves ``agents``.
+
+    Arguments as ``ObstacleRaceEnv`` plus ``num_racers`` (1..16).
+    """
+
+    metadata = {"name": "obstacle_race_v0", "render_modes": ["rgb_array"], "render_fps": 25,
+                "is_parallelizable": True}
+
+    def __init__(
+        self,
+        num_racers: int = 4,
+        map_id: int | str | None = 0,
+        course_seed: int | None = None,
+        max_episode_steps: int = 1000,
+        frame_skip: int = FRAME_SKIP,
+        render_mode: str | None = None,
+        width: int = 320,
+        height: int = 240,
+    ) -> None:
+        self.num_racers = check_positive_int("num_racers", num_racers, 1, MAX_RACERS)
+        self._map_choice = check_map_choice(map_id)
+        self._course_seed = check_course_seed(course_seed)
+        self.frame_skip = check_positive_int("frame_skip", frame_skip, 1, 1000)
+        self.max_episode_steps = check_positive_int("max_episode_steps", max_episode_steps)
+        self.render_mode = check_render_mode(render_mode)
+        self.width = check_positive_int("width", width, 16, 4096)
+        self.height = check_positive_int("height", height, 16, 4096)
+        self.possible_agents = [f"racer_{i}" for i in range(self.num_racers)]
+        self.agents: list[str] = []
+        self.sim = RaceSim(self.num_racers, self.frame_skip, self.max_episode_steps)
+        self._rng, _ = seeding.np_random(None)
+        self._renderer = None
+        self._idle = np.array([1, 1, 0, 0, 0, 0, 0, 1])
+
+    @functools.cache  # noqa: B019 - PettingZoo wants the same object per agent
+    def observation_space(self, agent: str):
+        return observation_space()
+
+    @functools.cache  # noqa: B019
+    def action_space(self, agent: str):
+        return action_space()
+
+    @property
+    def model(self):
+        return self.sim.model
+
+    @property
+    def data(self):
+        return self.sim.data
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+        if seed is not None:
+            self._rng, _ = seeding.np_random(seed)
+        opts = check_reset_options(options)
+        map_id = opts.get("map_id", self._map_choice)
+        if map_id is None:
+            map_id = int(self._rng.integers(NUM_MAPS))
+        cseed = opts.get("course_seed", self._course_seed)
+        if cseed is None:
+            cseed = int(self._rng.integers(COURSE_SEEDS))
+        old = getattr(self.sim, "model", None)
+        self.sim.load(map_id, cseed)
+        if self._renderer is not None and self.sim.model is not old:
+            self._renderer.close()
+            self._renderer = None
+        obs = self.sim.reset()
+        self.agents = list(self.possible_agents)
+        info = {"map_id": map_id, "course_seed": cseed}
+        return self._split(obs, self.agents), {a: dict(info) for a in self.agents}
+
+    @staticmethod
+    def _split(obs: dict[str, np.ndarray], agents: list[str]) -> dict[str, dict[str, np.ndarray]]:
+        return {a: {k: v[int(a[6:])] for k, v in obs.items()} for a in agents}
+
+    def step(self, actions: dict[str, Any]):
+        acts = np.tile(self._idle, (self.num_racers, 1))
+        for agent, action in actions.items():
+            if agent not in self.possible_agents:
+                raise ValueError(f"agent {agent!r} is unknown; allowed: {self.possible_agents}")
+            if agent in self.agents:
+                acts[int(agent[6:])] = check_action(action)
+        sim = self.sim
+        obs, terms, done, err = sim.step(acts)
+        live = self.agents
+        truncate = sim.steps >= self.max_episode_steps or err is not None
+        if err is not None:
+            warnings.warn(err, RuntimeWarning, stacklevel=2)
+        rewards, terminations, truncations, infos = {}, {}, {}, {}
+        for a in live:
+            i = int(a[6:])
+            tl = terms[i]
+            info = {"reward_terms": dict(zip(REWARD_TERMS, tl, strict=True)), "map_id": sim.map_id,
+                    "course_seed": sim.course_seed}
+            rewards[a] = sum(tl)
+            terminations[a] = bool(done[i])
+            truncations[a] = bool(truncate)
+            if err is not None:
+                info["physics_error"] = err
+            if terminations[a] or truncations[a]:
+                info["episode_metrics"] = sim.episode_metrics(i)
+            infos[a] = info
+        observations = self._split(obs, live)
+        self.agents = [a for a in live if not (terminations[a] or truncations[a])]
+        return observations, rewards, terminations, truncations, infos
+
+    def render(self) -> np.ndarray | None:
+        """An RGB frame chasing the leading racer, when ``render_mode="rgb_array"``."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            from game_env.render import RaceRenderer
+
+            self._renderer = RaceRenderer(self.sim.model, self.width, self.height)
+        pos = self.sim.pos
+        return self._renderer.chase(self.sim.data, pos[int(np.argmax(pos[:, 0]))])
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def parallel_env(num_racers: int = 4, map_id: int | str | None = 0, **kwargs: Any) -> RaceParallelEnv:
+    """A PettingZoo ParallelEnv with ``num_racers`` racers on map ``map_id``."""
+    return RaceParallelEnv(num_racers=num_racers, map_id=map_id, **kwargs)
