@@ -50,7 +50,7 @@ class AsorDiscriminatorModule(_LearnerOnlyModule):
             torch.manual_seed(self.asor.seed)
         self.disc = Discriminator(self.feature_dim, self.asor.disc_hiddens)
         init = self.asor.lambda_init if self.asor.lambda_ == "auto" else 0.0
-        self.register_buffer("auto_lambda", torch.tensor(float(init), dtype=torch.float64))
+        self.register_buffer("auto_lambda", torch.tensor(float(init)))
 
     def logits(self, features: torch.Tensor) -> torch.Tensor:
         """Discriminator logits for flat features [N, D] → [N]."""

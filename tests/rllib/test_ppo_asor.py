@@ -1,0 +1,165 @@
+"""PPO+ASOR on the lava world through real RLlib: rewards, aux training, checkpoints."""
+
+import copy
+
+import numpy as np
+import pytest
+import torch
+from ray.rllib.algorithms.algorithm import Algorithm
+from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.core import DEFAULT_MODULE_ID, Columns
+from ray.rllib.core.rl_module.multi_rl_module import MultiRLModule
+
+import rllib_asor
+import rllib_asor.envs  # noqa: F401  (registers rllib_asor/LavaWorld-v0)
+from rllib_asor.asor.reward import reward_bonus
+from rllib_asor.rllib.connector import AsorRewardConnector
+
+DISC, PROXY = "asor_disc.default_policy", "asor_proxy.default_policy"
+
+
+def lava_ppo(**asor):
+    config = (
+        PPOConfig()
+        .environment("rllib_asor/LavaWorld-v0")
+        .env_runners(num_env_runners=0, num_envs_per_env_runner=2)
+        .training(train_batch_size=256, minibatch_size=64, num_epochs=2, lr=1e-3)
+        .rl_module(model_config={"fcnet_hiddens": [32, 32]})
+        .debugging(seed=0)
+    )
+    return rllib_asor.with_asor(config, **({"lambda_": 0.1, "seed": 0} | asor))
+
+
+@pytest.fixture(scope="module")
+def algo(ray_session):
+    algo = lava_ppo().build_algo()
+    yield algo
+    algo.stop()
+
+
+def sample_episodes(algo, n):
+    """Fresh copies: the Learner pipeline edits episodes in place (as after a remote transfer)."""
+    return copy.deepcopy(algo.env_runner.sample(num_timesteps=n, random_actions=False))
+
+
+def aux_state(algo):
+    module = algo.learner_group._learner.module
+    return {
+        mid: {k: v.clone() for k, v in module[mid].state_dict().items()} for mid in (DISC, PROXY)
+    }
+
+
+def test_with_asor_wires_learner_modules_and_settings(algo):
+    assert set(algo.learner_group._learner.module.keys()) == {DEFAULT_MODULE_ID, DISC, PROXY}
+    assert algo.config.learner_config_dict["asor"]["lambda_"] == 0.1
+    # learner-only: the (single-agent) env runner holds just the policy, no aux modules.
+    assert not isinstance(algo.env_runner.module, MultiRLModule)
+
+
+def test_rewards_change_by_lambda_times_bonus(algo):
+    learner = algo.learner_group._learner
+    episodes = sample_episodes(algo, 200)
+    env_total = sum(float(np.sum(e.get_rewards())) for e in episodes)
+    batch = learner._learner_connector(
+        rl_module=learner.module,
+        batch={},
+        episodes=episodes,
+        shared_data={},
+        metrics=learner.metrics,
+    )
+    pb = batch[DEFAULT_MODULE_ID]
+    valid = pb[Columns.LOSS_MASK].bool()
+    with torch.no_grad():
+        logits = learner.module[DISC].logits(batch[DISC][Columns.OBS])
+    expected = env_total + 0.1 * reward_bonus(logits).sum().item()
+    assert pb[Columns.REWARDS][valid].sum().item() == pytest.approx(expected, rel=1e-4, abs=1e-4)
+    assert 0.1 * reward_bonus(logits).sum().item() < 0  # the log form is a penalty
+    # The discriminator batch holds exactly the valid steps, ~ρ1ρ2 of them labelled real.
+    assert batch[DISC][Columns.OBS].shape[0] == int(valid.sum())
+    real_fraction = batch[DISC]["asor_label"].mean().item()
+    assert 0.2 <= real_fraction <= 0.3
+
+
+def test_two_iterations_train_aux_modules_and_report_metrics(algo):
+    before = aux_state(algo)
+    for _ in range(2):
+        result = algo.train()
+    after = aux_state(algo)
+    for mid in (DISC, PROXY):
+        changed = [k for k in before[mid] if not torch.equal(before[mid][k], after[mid][k])]
+        assert changed, f"{mid} did not change"
+    assert not torch.equal(before[PROXY]["rnd.obs_rms.count"], after[PROXY]["rnd.obs_rms.count"])
+    assert torch.equal(before[PROXY]["rnd.target.0.weight"], after[PROXY]["rnd.target.0.weight"])
+    asor = result["asor"]
+    for key in (
+        "disc_loss",
+        "disc_acc",
+        "aug_reward_mean",
+        "aug_reward_min",
+        "aug_reward_max",
+        "real_fraction",
+        "rnd_loss",
+        "lambda",
+        "js_estimate",
+    ):
+        assert np.isfinite(asor[key]), key
+    assert asor["aug_reward_max"] <= 0.0 and asor["lambda"] == 0.1
+
+
+def test_checkpoint_restores_aux_weights_and_normaliser(algo, tmp_path):
+    algo.train()
+    algo.save_to_path(str(tmp_path))
+    saved = aux_state(algo)
+    restored = Algorithm.from_checkpoint(str(tmp_path))
+    try:
+        got = aux_state(restored)
+        for mid in (DISC, PROXY):
+            assert saved[mid].keys() == got[mid].keys()
+            for k in saved[mid]:
+                assert torch.equal(saved[mid][k], got[mid][k]), (mid, k)
+        assert (
+            restored.config.learner_config_dict["asor"] == algo.config.learner_config_dict["asor"]
+        )
+    finally:
+        restored.stop()
+
+
+def test_nan_observation_is_a_clear_error(algo):
+    learner = algo.learner_group._learner
+    piece = next(
+        c for c in learner._learner_connector.connectors if isinstance(c, AsorRewardConnector)
+    )
+    episodes = sample_episodes(algo, 64)
+    batch = learner._learner_connector(
+        rl_module=learner.module, batch={}, episodes=episodes, shared_data={}, metrics=None
+    )
+    pb = batch[DEFAULT_MODULE_ID]
+    first_valid = int(torch.nonzero(pb[Columns.LOSS_MASK])[0])
+    pb[Columns.OBS][first_valid, 0] = float("nan")
+    with pytest.raises(ValueError, match="NaN/inf"):
+        piece(rl_module=learner.module, batch=batch, episodes=episodes)
+
+
+def test_srpo_mode_builds_no_proxy(ray_session):
+    algo = lava_ppo(mode="srpo").build_algo()
+    try:
+        assert PROXY not in algo.learner_group._learner.module.keys()
+        result = algo.train()
+        assert "rnd_loss" not in result["asor"] and result["asor"][
+            "real_fraction"
+        ] == pytest.approx(0.5, abs=0.05)
+    finally:
+        algo.stop()
+
+
+@pytest.mark.parametrize("bad", [{"rho_value": 0.0}, {"lambda_": -1.0}, {"proxy": "counts"}])
+def test_with_asor_rejects_bad_settings(bad):
+    with pytest.raises(ValueError, match="allowed"):
+        lava_ppo(**bad)
+
+
+def test_with_asor_rejects_unsupported_algorithm():
+    from ray.rllib.algorithms.dqn import DQNConfig
+
+    with pytest.raises(ValueError, match="supported"):
+        rllib_asor.with_asor(DQNConfig().environment("CartPole-v1"))
