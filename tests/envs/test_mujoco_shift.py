@@ -10,6 +10,9 @@ from gymnasium.utils.env_checker import check_env
 import rllib_asor.envs  # noqa: F401  (registers the ids)
 from rllib_asor.envs.mujoco_shift import MujocoShiftEnv, parse_dynamics
 
+# Gymnasium's v5 MuJoCo envs declare an unbounded Box; check_env warns about it (not ours).
+pytestmark = pytest.mark.filterwarnings("ignore:.*Box observation space:UserWarning")
+
 IDS = {
     "rllib_asor/HalfCheetahShift-v0": "HalfCheetah-v5",
     "rllib_asor/Walker2dShift-v0": "Walker2d-v5",
