@@ -39,6 +39,7 @@ def test_registered_id_makes_env_with_kwargs() -> None:
 def test_optimal_return_per_lava_row_by_value_iteration() -> None:
     assert {k: optimal_return(k) for k in LAVA_ROWS} == {2: 0.82, 3: 0.86, 4: 0.86, 5: 0.86}
     assert {k: optimal_return(k, layout="E") for k in LAVA_ROWS} == dict.fromkeys(LAVA_ROWS, 0.84)
+    assert LavaWorldEnv.optimal_return(2) == 0.82  # also reachable from the class
 
 
 def test_optimal_route_changes_with_lava_row() -> None:
