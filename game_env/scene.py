@@ -145,6 +145,7 @@ def build_spec(course: Course, num_racers: int) -> mujoco.MjSpec:
         g.name, g.type = f"racer{i}", mujoco.mjtGeom.mjGEOM_CAPSULE
         g.size, g.mass = [RACER_RADIUS, RACER_HALF, 0], RACER_MASS
         g.contype, g.conaffinity, g.condim = 3, 3, 1  # frictionless: actuators do the walking
+        g.priority = 1  # its condim wins over the floor's (MuJoCo uses the max otherwise)
         g.rgba = RACER_COLORS[i % len(RACER_COLORS)]
         eye = body.add_geom()
         eye.type, eye.size, eye.pos = mujoco.mjtGeom.mjGEOM_SPHERE, [0.12, 0, 0], [0, 0, RACER_HALF]

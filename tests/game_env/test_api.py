@@ -1,0 +1,134 @@
+"""Gymnasium/PettingZoo API conformance, registration, bad input and the no-ray/torch rule."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from pettingzoo.test import parallel_api_test
+
+import game_env
+from game_env.env import ObstacleRaceEnv
+from game_env.spaces import EPISODE_METRICS, REWARD_TERMS
+
+
+def test_gymnasium_check_env_passes_on_raw_and_made_env():
+    check_env(ObstacleRaceEnv(map_id=9, max_episode_steps=60), skip_render_check=True)
+    env = gym.make("game_env/ObstacleRace-v0", map_id=3, max_episode_steps=60)
+    check_env(env.unwrapped, skip_render_check=True)
+
+
+def test_made_env_exposes_model_data_frame_skip_and_map_id_in_info():
+    env = gym.make("game_env/ObstacleRace-v0", map_id=2)
+    _, info = env.reset(seed=0)
+    assert info["map_id"] == 2
+    assert env.unwrapped.frame_skip == 20 and env.unwrapped.model.nq >= 3
+    assert env.unwrapped.data.time == 0.0
+    _, _, _, _, info = env.step(env.action_space.sample())
+    assert info["map_id"] == 2 and set(info["reward_terms"]) == set(REWARD_TERMS)
+
+
+def test_pettingzoo_parallel_api_test_passes():
+    parallel_api_test(game_env.parallel_env(num_racers=3, map_id=4, max_episode_steps=120), num_cycles=150)
+
+
+def test_random_map_choice_draws_several_maps_from_env_rng():
+    env = ObstacleRaceEnv(map_id=None)
+    maps = {env.reset(seed=s)[1]["map_id"] for s in range(12)}
+    assert len(maps) >= 4 and maps <= set(range(game_env.NUM_MAPS))
+
+
+def test_reward_equals_sum_of_info_terms_and_metrics_at_episode_end():
+    env = ObstacleRaceEnv(map_id=0, course_seed=1, max_episode_steps=80)
+    env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(80):
+        _, reward, term, trunc, info = env.step(rng.integers(0, env.action_space.nvec))
+        assert reward == sum(info["reward_terms"].values())
+        assert list(info["reward_terms"]) == list(REWARD_TERMS)
+        if term or trunc:
+            break
+    assert trunc and set(info["episode_metrics"]) == set(EPISODE_METRICS)
+    m = info["episode_metrics"]
+    assert m["success"] == 0.0 and m["episode_length"] == 80.0
+    assert 0.0 <= m["unnecessary_jump_rate"] <= 1.0 and m["distance_from_cliff"] >= 0.0
+
+
+@pytest.mark.parametrize("map_id", [-1, 10, 3.5, "3", True])
+def test_unknown_map_id_raises_value_error_naming_value_and_range(map_id):
+    with pytest.raises(ValueError, match=r"map_id=.*0\.\.9"):
+        gym.make("game_env/ObstacleRace-v0", map_id=map_id)
+    with pytest.raises(ValueError, match="map_id"):
+        game_env.parallel_env(num_racers=2, map_id=map_id)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [({"num_racers": 0}, "num_racers"), ({"num_racers": 17}, "num_racers"),
+     ({"max_episode_steps": 0}, "max_episode_steps"), ({"frame_skip": -2}, "frame_skip"),
+     ({"render_mode": "human"}, "render_mode"), ({"course_seed": -1}, "course_seed")],
+)
+def test_malformed_arguments_raise_value_error_naming_them(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        game_env.parallel_env(**{"num_racers": 2, **kwargs})
+
+
+def test_malformed_reset_options_raise_value_error():
+    env = ObstacleRaceEnv()
+    with pytest.raises(ValueError, match=r"map_id=12.*0\.\.9"):
+        env.reset(options={"map_id": 12})
+    with pytest.raises(ValueError, match="options"):
+        env.reset(options="map 3")
+    _, info = env.reset(options={"map_id": 5, "course_seed": 7})
+    assert info == {"map_id": 5, "course_seed": 7}
+
+
+@pytest.mark.parametrize("action", [[3, 1, 0, 0, 0, 0, 0, 0], [1, 1, 0, 0, 0, 0, 8, 0], [1, 1, 0], "jump",
+                                    [1, 1, 0, 0, 0, 0, -1, 0], [0.5, 1, 0, 0, 0, 0, 0, 0]])
+def test_action_outside_space_raises_value_error_naming_it(action):
+    env = ObstacleRaceEnv()
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action .* outside"):
+        env.step(action)
+    penv = game_env.parallel_env(num_racers=2)
+    penv.reset(seed=0)
+    with pytest.raises(ValueError, match="action"):
+        penv.step({"racer_0": action, "racer_1": [1, 1, 0, 0, 0, 0, 0, 0]})
+
+
+def test_physics_blow_up_truncates_with_warning_and_reset_recovers():
+    env = ObstacleRaceEnv(map_id=0, course_seed=0)
+    env.reset(seed=0)
+    env.data.qvel[0] = np.nan
+    with pytest.warns(RuntimeWarning, match="unstable"):
+        obs, reward, term, trunc, info = env.step([1, 1, 0, 0, 0, 0, 0, 1])
+    assert trunc and not term and "physics_error" in info
+    assert env.observation_space.contains(obs)
+    obs, _ = env.reset()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for _ in range(5):
+            obs, *_ = env.step([2, 1, 0, 0, 0, 0, 0, 0])
+    assert env.observation_space.contains(obs)
+
+
+def test_parallel_physics_blow_up_truncates_every_racer():
+    env = game_env.parallel_env(num_racers=2, map_id=1)
+    env.reset(seed=0)
+    env.data.qpos[1] = np.inf
+    with pytest.warns(RuntimeWarning):
+        _, _, _, truncs, infos = env.step({a: [1, 1, 0, 0, 0, 0, 0, 1] for a in env.agents})
+    assert all(truncs.values()) and all("physics_error" in i for i in infos.values())
+    assert env.agents == []
+    env.reset(seed=1)
+    assert len(env.agents) == 2
+
+
+def test_import_game_env_imports_neither_ray_nor_torch():
+    code = "import sys, game_env; import game_env.scripted; assert 'ray' not in sys.modules and 'torch' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).parents[2]))
