@@ -331,6 +331,11 @@ class LavaWorldEnv(gym.Env[np.ndarray, np.int64]):
         """The observation (in this env's obs_mode) at (row, col) under `lava_row`."""
         return observation_at(row, col, lava_row, self.obs_mode)
 
+    def observation_grid(self, lava_row: int) -> tuple[list[Cell], np.ndarray]:
+        """Free cells under `lava_row` and their observations stacked (n_cells, obs_dim)."""
+        cells = free_cells(_check_lava_row(lava_row))
+        return cells, np.stack([self.observation_at(r, c, lava_row) for r, c in cells])
+
     optimal_return = staticmethod(optimal_return)
 
     # -- gymnasium API --------------------------------------------------------------------------

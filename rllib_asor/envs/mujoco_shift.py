@@ -33,7 +33,7 @@ element instead, as rand_param_envs/PEARL do). Modes:
   With `fixed`/`dynamics` given, nothing is sampled unless `params` is passed explicitly.
 
 `info["dynamics"]` holds the current values, `info["dynamics_id"]` an int (task index with
-`num_tasks`, else a stable CRC32 of the rounded values; 0 = nominal).
+`num_tasks`, else a stable 31-bit CRC32 of the rounded values; 0 = nominal).
 After a rewrite `mujoco.mj_setConst` refreshes the derived constants (subtree masses,
 inverse weights) on a scratch MjData, so the episode's state is untouched.
 """
@@ -104,21 +104,32 @@ def _check_fixed(fixed: Mapping[str, Any], key: str = "fixed") -> dict[str, Any]
         if name not in ALL_PARAMS:
             raise ValueError(f"{key}[{name!r}] is not allowed; expected names from {ALL_PARAMS}")
         if name == "wind":
-            w = np.atleast_1d(np.asarray(value, dtype=np.float64))
+            try:
+                w = np.atleast_1d(np.asarray(value, dtype=np.float64))
+            except (TypeError, ValueError):
+                w = np.array([np.nan])
             if w.shape not in ((1,), (2,)) or not np.all(np.isfinite(w)):
                 raise ValueError(
                     f"{key}['wind']={value!r} is not allowed; expected a float (x wind) or (wx, wy)"
                 )
             out["wind"] = np.array([w[0], w[1] if w.shape == (2,) else 0.0])
         elif name == "density":
-            if isinstance(value, bool) or not np.isfinite(value) or value < 0:
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float, np.integer, np.floating))
+                or not np.isfinite(value)
+                or value < 0
+            ):
                 raise ValueError(
                     f"{key}['density']={value!r} is not allowed; expected a number >= 0"
                 )
             out["density"] = float(value)
         else:
-            v = np.asarray(value, dtype=np.float64)
-            if not np.all(np.isfinite(v)) or np.any(v <= 0):
+            try:
+                v = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                v = np.array(np.nan)
+            if isinstance(value, bool) or not np.all(np.isfinite(v)) or np.any(v <= 0):
                 raise ValueError(
                     f"{key}[{name!r}]={value!r} is not allowed; expected a positive multiplier"
                 )
@@ -273,7 +284,7 @@ class MujocoShiftEnv(gym.Env[np.ndarray, np.ndarray]):
         text = ";".join(
             f"{k}={np.round(np.asarray(values[k]), 6).tolist()}" for k in sorted(values)
         )
-        return zlib.crc32(text.encode())
+        return zlib.crc32(text.encode()) & 0x7FFFFFFF  # fits int32
 
     def _draw(self) -> None:
         if self.tasks is not None:

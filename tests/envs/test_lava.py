@@ -129,6 +129,14 @@ def test_cells_lists_free_cells() -> None:
     assert len(LavaWorldEnv.cells(3)) == 45 and (3, 4) not in LavaWorldEnv.cells(3)
 
 
+def test_observation_grid_stacks_observations_of_free_cells() -> None:
+    env = LavaWorldEnv(obs_mode="raw")
+    cells, obs = env.observation_grid(2)
+    assert len(cells) == 45 and obs.shape == (45, 3)
+    np.testing.assert_array_equal(obs[cells.index((2, 3))], [2, 3, 1])
+    assert LavaWorldEnv().observation_grid(5)[1].shape == (45, 15)
+
+
 def test_render_ansi_shows_agent_lava_goal() -> None:
     env = LavaWorldEnv(render_mode="ansi")
     env.reset(seed=0, options={"lava_row": 3})

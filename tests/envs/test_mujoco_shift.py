@@ -157,6 +157,8 @@ def test_task_pool_gives_small_ids_and_repeats_dynamics() -> None:
         ({"params": ("density",)}, "params"),
         ({"fixed": {"mass": -1.0}}, "fixed"),
         ({"fixed": {"wind": (1, 2, 3)}}, "wind"),
+        ({"fixed": {"density": "thick"}}, "density"),
+        ({"fixed": {"mass": "heavy"}}, "mass"),
         ({"dynamics": "mass_times_3"}, "dynamics"),
         ({"switch_every": 0}, "switch_every"),
         ({"num_tasks": 2, "switch_every": 10}, "num_tasks"),
