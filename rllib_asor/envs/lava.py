@@ -30,7 +30,8 @@ its best is 0.82 under every k (exhaustive search: `best_reactive_returns`).
 
 Helpers for benchmarks/reports: `LavaWorldEnv.cells`, `LavaWorldEnv.observation_at`
 (the observation at a cell under a lava row, e.g. for a pseudo-count heatmap),
-`optimal_return` (value iteration, k known), `optimal_routes`, `best_reactive_returns`.
+`optimal_return` (value iteration, k known), `optimal_routes`, `best_reactive_returns` and
+`best_reactive_policy`.
 """
 
 from __future__ import annotations
@@ -194,13 +195,22 @@ def best_reactive_returns(
     """Per-row returns of the best deterministic memoryless policy on (row, col, flag).
 
     Exhaustive branch-and-bound over policies (the mean return over `lava_rows` is maximised);
-    this is the best an agent that only sees the observation can do. Cached; takes ~1 s.
+    this is the best an agent that only sees the observation can do. Cached; takes a few s.
     """
-    return dict(_best_reactive(_check_layout(layout), tuple(lava_rows), int(max_steps)))
+    return dict(_best_reactive(_check_layout(layout), tuple(lava_rows), int(max_steps))[0])
+
+
+def best_reactive_policy(
+    layout: str = "B", lava_rows: Sequence[int] = LAVA_ROWS, max_steps: int = MAX_STEPS
+) -> dict[tuple[int, int, bool], int]:
+    """The policy behind `best_reactive_returns`: (row, col, flag) -> action, visited obs only."""
+    return dict(_best_reactive(_check_layout(layout), tuple(lava_rows), int(max_steps))[1])
 
 
 @cache
-def _best_reactive(layout: str, lava_rows: tuple[int, ...], max_steps: int) -> dict[int, float]:
+def _best_reactive(
+    layout: str, lava_rows: tuple[int, ...], max_steps: int
+) -> tuple[dict[int, float], dict[tuple[int, int, bool], int]]:
     start = STARTS[_check_layout(layout)]
     rows = tuple(sorted({_check_lava_row(k, "lava_rows") for k in lava_rows}))  # 2 first: fastest
     lavas = {k: lava_cells(k) for k in rows}
@@ -214,6 +224,12 @@ def _best_reactive(layout: str, lava_rows: tuple[int, ...], max_steps: int) -> d
     def obs(cell: Cell, k: int) -> tuple[int, int, bool]:
         return cell[0], cell[1], flags[k][cell]
 
+    def _q(v: dict[Cell, float], lava: frozenset[Cell], cell: Cell, a: int) -> float:
+        n = move(cell, a)
+        if n == GOAL:
+            return STEP_REWARD + GOAL_REWARD
+        return STEP_REWARD if n in lava else STEP_REWARD + v[n]
+
     def bound(state: dict[int, Any]) -> float:
         total = 0.0
         for k, (cell, ret, _visited, done) in state.items():
@@ -226,7 +242,8 @@ def _best_reactive(layout: str, lava_rows: tuple[int, ...], max_steps: int) -> d
         active = [k for k, s in state.items() if not s[3]]
         if not active:
             total = sum(s[1] for s in state.values())
-            best["total"], best["returns"] = total, {k: round(s[1], 10) for k, s in state.items()}
+            best["total"], best["policy"] = total, policy
+            best["returns"] = {k: round(s[1], 10) for k, s in state.items()}
             return
         k = active[0]
         cell, ret, visited, _ = state[k]
@@ -234,7 +251,7 @@ def _best_reactive(layout: str, lava_rows: tuple[int, ...], max_steps: int) -> d
         actions = (
             [policy[o]]
             if o in policy
-            else sorted(range(len(MOVES)), key=lambda a: -vals[k].get(move(cell, a), -9.0))
+            else sorted(range(len(MOVES)), key=lambda a: -_q(vals[k], lavas[k], cell, a))
         )
         for a in actions:
             n = move(cell, a)
@@ -255,7 +272,7 @@ def _best_reactive(layout: str, lava_rows: tuple[int, ...], max_steps: int) -> d
                 search(new, {**policy, o: a})
 
     search({k: (start, 0.0, frozenset({start}), False) for k in rows}, {})
-    return dict(best["returns"])
+    return best["returns"], best["policy"]
 
 
 class LavaWorldEnv(gym.Env[np.ndarray, np.int64]):

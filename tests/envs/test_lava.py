@@ -13,6 +13,7 @@ from rllib_asor.envs.lava import (
     GOAL,
     LAVA_ROWS,
     LavaWorldEnv,
+    best_reactive_policy,
     best_reactive_returns,
     lava_cells,
     optimal_return,
@@ -61,6 +62,37 @@ def test_best_observation_only_policy_is_082_on_every_row() -> None:
     # row 2 before (2,3), so the best reactive policy takes the 9-step detour everywhere.
     assert best_reactive_returns("B") == dict.fromkeys(LAVA_ROWS, 0.82)
     assert best_reactive_returns("B", lava_rows=(3, 4, 5)) == dict.fromkeys((3, 4, 5), 0.86)
+
+
+def test_best_reactive_policy_achieves_its_returns_in_the_env() -> None:
+    policy = best_reactive_policy("B")
+    env = LavaWorldEnv(obs_mode="raw")
+    for k in LAVA_ROWS:
+        obs, _ = env.reset(seed=0, options={"lava_row": k})
+        total, done = 0.0, False
+        while not done:
+            key = (int(obs[0]), int(obs[1]), bool(obs[2]))
+            obs, r, term, trunc, info = env.step(policy[key])
+            total, done = total + r, term or trunc
+        assert info["is_success"] and total == pytest.approx(0.82)
+
+
+def test_no_random_reactive_policy_beats_the_exhaustive_search() -> None:
+    rng = np.random.default_rng(0)
+    env = LavaWorldEnv(obs_mode="raw")
+    best = sum(best_reactive_returns("B").values())
+    for _ in range(100):
+        table = rng.integers(0, 4, size=(7, 7, 2))
+        # bias towards the goal (down/right) so some policies do reach it
+        table = np.where(rng.random((7, 7, 2)) < 0.7, rng.choice([1, 2], size=(7, 7, 2)), table)
+        total = 0.0
+        for k in LAVA_ROWS:
+            obs, _ = env.reset(seed=0, options={"lava_row": k})
+            done = False
+            while not done:
+                obs, r, term, trunc, _ = env.step(int(table[int(obs[0]), int(obs[1]), int(obs[2])]))
+                total, done = total + r, term or trunc
+        assert total <= best + 1e-9
 
 
 def _run(env: LavaWorldEnv, actions: list[int], lava_row: int):
