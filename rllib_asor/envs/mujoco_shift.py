@@ -198,11 +198,6 @@ class MujocoShiftEnv(gym.Env[np.ndarray, np.ndarray]):
                 isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1
             ):
                 raise ValueError(f"{key}={value!r} is not allowed; expected None or an int >= 1")
-        if num_tasks is not None and switch_every is not None:
-            raise ValueError(
-                f"num_tasks={num_tasks!r} with switch_every={switch_every!r} is not allowed; "
-                "choose one of them"
-            )
         self.log_scale_limit = _positive_number("log_scale_limit", log_scale_limit)
         self.scale_base = _positive_number("scale_base", scale_base)
         self.wind_limit = _positive_number("wind_limit", wind_limit)
