@@ -86,16 +86,17 @@ class CourseGrids:
         self.stacks = [self.buf[o : o + sz].reshape(num_racers, c, *sh)
                        for o, sz, c, sh in zip(offs[:-1], sizes, chans, shape, strict=True)]
         ny = np.array([sh[1] for sh in shape])
-        self.max_ix = np.array([sh[0] - GRID for sh in shape])[:, None]
-        self.max_iy = (ny - GRID)[:, None]
-        self.lay_ny = ny[:, None]
+        self.max_ix = np.array([sh[0] - GRID for sh in shape], np.int32)[:, None]
+        self.max_iy = (ny - GRID).astype(np.int32)[:, None]
+        self.lay_ny = ny[:, None].astype(np.int32)
         out = [(0, 0), (0, 1), (1, 0), (1, 1), (0, 2), (1, 2), (0, 3), (2, 0), (3, 0), (0, 4), (2, 1), (3, 1)]
         self.layer_of = np.array([lay for lay, _ in out])
         cell = np.arange(GRID)
         self.base = np.stack([offs[lay] + ch * shape[lay][0] * shape[lay][1] + cell[:, None] * ny[lay] + cell[None]
-                              for lay, ch in out])  # (12, 16, 16)
+                              for lay, ch in out]).astype(np.int32)  # (12, 16, 16)
         stride = np.array([chans[lay] * shape[lay][0] * shape[lay][1] for lay, _ in out])
-        self.racer_shift = (stride[:, None] * np.arange(num_racers)[None])  # (12, N)
+        self.racer_shift = (stride[:, None] * np.arange(num_racers)[None]).astype(np.int32)  # (12, N)
+        assert self.buf.size < 2**31
         self.ox = self.origin[0][:, None]
         self.oy = self.origin[1][:, None]
         self.inv = self.inv_res[:, None]
@@ -243,14 +244,14 @@ class CourseGrids:
 
         One gather from the flat buffer builds all twelve channels; the four arrays are views.
         """
-        ix = ((x[None] - self.ox) * self.inv).astype(np.intp)
-        iy = ((y[None] - self.oy) * self.inv).astype(np.intp)
+        ix = ((x[None] - self.ox) * self.inv).astype(np.int32)
+        iy = ((y[None] - self.oy) * self.inv).astype(np.int32)
         ix -= HALF
         iy -= HALF
         _clip(ix, 0, self.max_ix, out=ix)
         _clip(iy, 0, self.max_iy, out=iy)
         shift = (ix * self.lay_ny + iy)[self.layer_of] + self.racer_shift  # (12, N)
-        out = self.buf[self.base[None] + shift.T[:, :, None, None]]  # (N, 12, 16, 16)
+        out = self.buf.take(self.base[None] + shift.T[:, :, None, None])  # (N, 12, 16, 16)
         hts = out[:, 0:4:2]
         hts -= (feet * 0.2)[:, None, None, None]
         _clip(hts, -1.0, 1.0, out=hts)

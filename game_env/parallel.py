@@ -14,6 +14,7 @@ from game_env.constants import FRAME_SKIP
 from game_env.maps import NUM_MAPS
 from game_env.options import (
     COURSE_SEEDS,
+    NVEC,
     check_action,
     check_course_seed,
     check_map_choice,
@@ -59,7 +60,9 @@ class RaceParallelEnv(ParallelEnv):
         self.sim = RaceSim(self.num_racers, self.frame_skip, self.max_episode_steps)
         self._rng, _ = seeding.np_random(None)
         self._renderer = None
-        self._idle = np.array([1, 1, 0, 0, 0, 0, 0, 1])
+        self._idle_all = np.tile(np.array([1, 1, 0, 0, 0, 0, 0, 1]), (self.num_racers, 1))
+        self._index = {a: i for i, a in enumerate(self.possible_agents)}
+        self._live: set[str] = set()
 
     @functools.cache  # noqa: B019 - PettingZoo wants the same object per agent
     def observation_space(self, agent: str):
@@ -94,6 +97,7 @@ class RaceParallelEnv(ParallelEnv):
             self._renderer = None
         obs = self.sim.reset()
         self.agents = list(self.possible_agents)
+        self._live = set(self.agents)
         info = {"map_id": map_id, "course_seed": cseed}
         return self._split(obs, self.agents), {a: dict(info) for a in self.agents}
 
@@ -102,12 +106,23 @@ class RaceParallelEnv(ParallelEnv):
         return {a: {k: v[int(a[6:])] for k, v in obs.items()} for a in agents}
 
     def step(self, actions: dict[str, Any]):
-        acts = np.tile(self._idle, (self.num_racers, 1))
-        for agent, action in actions.items():
-            if agent not in self.possible_agents:
-                raise ValueError(f"agent {agent!r} is unknown; allowed: {self.possible_agents}")
-            if agent in self.agents:
-                acts[int(agent[6:])] = check_action(action)
+        acts = self._idle_all.copy()
+        try:  # fast path: every value already a valid int action
+            live = [a for a in actions if a in self._live]
+            rows = np.array([actions[a] for a in live])
+            ok = len(live) == len(actions) and rows.dtype.kind in "iu" and rows.shape == (len(live), 8) and (
+                (rows >= 0) & (rows < NVEC)).all()
+        except (ValueError, TypeError):
+            ok = False
+        if ok:
+            if live:
+                acts[[self._index[a] for a in live]] = rows
+        else:
+            for agent, action in actions.items():
+                if agent not in self._index:
+                    raise ValueError(f"agent {agent!r} is unknown; allowed: {self.possible_agents}")
+                if agent in self._live:
+                    acts[self._index[agent]] = check_action(action)
         sim = self.sim
         obs, terms, done, err = sim.step(acts)
         live = self.agents
@@ -130,6 +145,7 @@ class RaceParallelEnv(ParallelEnv):
             infos[a] = info
         observations = self._split(obs, live)
         self.agents = [a for a in live if not (terminations[a] or truncations[a])]
+        self._live = set(self.agents)
         return observations, rewards, terminations, truncations, infos
 
     def render(self) -> np.ndarray | None:

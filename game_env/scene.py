@@ -61,6 +61,12 @@ def build_spec(course: Course, num_racers: int) -> mujoco.MjSpec:
     spec.visual.global_.offwidth = 1280
     spec.visual.global_.offheight = 720
     spec.visual.quality.shadowsize = 0
+    spec.visual.headlight.ambient = [0.45, 0.45, 0.45]
+    spec.visual.headlight.diffuse = [0.5, 0.5, 0.5]
+    spec.visual.rgba.haze = [0.6, 0.8, 1.0, 1]
+    sky = spec.add_texture()
+    sky.name, sky.type, sky.builtin = "sky", mujoco.mjtTexture.mjTEXTURE_SKYBOX, mujoco.mjtBuiltin.mjBUILTIN_GRADIENT
+    sky.rgb1, sky.rgb2, sky.width, sky.height = [0.55, 0.8, 1.0], [0.95, 0.97, 1.0], 64, 64
     wb = spec.worldbody
     light = wb.add_light()
     light.pos = [course.length / 2, 0, 40]

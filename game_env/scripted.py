@@ -104,8 +104,8 @@ class ScriptedRacer:
             if x < wait_x - 0.25:
                 mx, sprint = 1, 0  # walk up to the waiting spot outside the sweep
             elif x <= wait_x + 0.3:
-                go = grounded and self._clear_jump(ham, x, y, vx, feet, t)
-                mx, sprint, jump = (1, 1, 1) if go else (0, 0, 0)
+                go = not grounded or self._clear_jump(ham, x, y, vx, feet, t)
+                mx, sprint, jump = (1, 1, int(grounded)) if go else (0, 0, 0)
             else:  # inside the sweep: keep going, hop if the bar is about to arrive
                 mx, sprint = 1, 1
                 eta = self._hammer_eta(x, y, vx, vy, feet, t)

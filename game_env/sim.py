@@ -24,6 +24,7 @@ from game_env.constants import (
     FEET,
     FRAME_SKIP,
     JUMP_SPEED,
+    RACER_RADIUS,
     RUN_SPEED,
     SPRINT_SPEED,
 )
@@ -101,7 +102,7 @@ class RaceSim:
         self.tramps = Trampolines(course)
         self.tiles = Tiles(course, idx, g)
         self.balloons = Balloons(course, model, idx)
-        self.need_contacts = self.n > 1 or self.balloons.n > 0
+        self.need_contacts = bool(self.balloons.burstable.any())  # touches burst balloons
         self.geom2racer = np.full(model.ngeom + 1, -1, np.intp)
         self.geom2racer[idx.racer_geom] = np.arange(self.n)
         self.qpos_i = idx.racer_qpos
@@ -254,38 +255,46 @@ class RaceSim:
         ax, ay = self.vxy_adr[i]
         self.data.qvel[ax], self.data.qvel[ay] = v0 * dx, v0 * dy
 
-    def _contacts(self) -> tuple[list[bool], np.ndarray]:
-        """Read contacts once: racers supported by another body, and geoms racers touched."""
+    def _touched(self) -> np.ndarray:
+        """Read contacts once: the geoms any racer touches."""
         data = self.data
         nc = data.ncon
-        supported = [False] * self.n
         if not nc:
-            return supported, np.zeros(0, np.intp)
-        con = data.contact
-        g = con.geom[:nc]
-        nz = con.frame[:nc, 2]
-        r0, r1 = self.geom2racer[g[:, 0]], self.geom2racer[g[:, 1]]
-        for i in r0[(r0 >= 0) & (nz < -0.5)].tolist() + r1[(r1 >= 0) & (nz > 0.5)].tolist():
-            supported[i] = True
-        return supported, np.concatenate((g[r0 >= 0, 1], g[r1 >= 0, 0]))
+            return np.zeros(0, np.intp)
+        g = data.contact.geom[:nc]
+        r0, r1 = self.geom2racer[g[:, 0]] >= 0, self.geom2racer[g[:, 1]] >= 0
+        return np.concatenate((g[r0, 1], g[r1, 0]))
+
+    def _on_racers(self, pos: list[float]) -> list[bool]:
+        """Racers standing on another racer's head (capsules stacked)."""
+        out = [False] * self.n
+        reach, top = (2 * RACER_RADIUS) ** 2, 2 * FEET
+        for i in range(self.n):
+            xi, yi, zi = pos[3 * i: 3 * i + 3]
+            for j in range(self.n):
+                if j != i:
+                    dz = zi - pos[3 * j + 2]
+                    if top - 0.45 < dz < top + 0.1 and (xi - pos[3 * j]) ** 2 + (yi - pos[3 * j + 1]) ** 2 < reach:
+                        out[i] = True
+        return out
 
     def _after_physics(self, t0: float, t1: float):
         data = self.data
         pos = data.qpos[self.qpos_flat].tolist()
         vel = data.qvel[self.qvel_flat].tolist()
         if self.need_contacts:
-            supported, touched = self._contacts()
-            self.balloons.touch(touched)
-        else:
-            supported = None
+            self.balloons.touch(self._touched())
+        supported = self._on_racers(pos) if self.n > 1 else None
         fine_h, belt_x, belt_y, tile_id, cliff_map = self.maps
-        all_terms, done, floors = [], [], []
+        all_terms, done, floors, cliffs = [], [], [], []
         for i, r in enumerate(self.racers):
             terms = [0.0] * 7
             all_terms.append(terms)
             if not r.active:
                 done.append(False)
-                floors.append(self._floor(pos, i)[0])
+                fl, ix, iy = self._floor(pos, i)
+                floors.append(fl)
+                cliffs.append(float(cliff_map[ix, iy]))
                 continue
             x, y, z = pos[3 * i: 3 * i + 3]
             vz = vel[3 * i + 2]
@@ -320,9 +329,11 @@ class RaceSim:
                 terms[4] += R_FALL
                 x, y, z = self._respawn(i, t1)
                 pos[3 * i: 3 * i + 3] = (x, y, z)
-                floor = self._floor(pos, i)[0]
+                floor, ix, iy = self._floor(pos, i)
                 feet = z - FEET
             floors.append(floor)
+            cliff = float(cliff_map[ix, iy])
+            cliffs.append(cliff)
             if r.in_jump:  # necessary if it crosses void, climbs or clears a hammer
                 if floor < VOID / 2 or (self.hammers.n and self.hammers.near(x, y)):
                     r.jump_needed = True
@@ -357,7 +368,7 @@ class RaceSim:
                 r.trapped = True
             terms[6] = R_TIME
             if grounded:
-                r.cliff_sum += float(cliff_map[self._floor(pos, i)[1:]])
+                r.cliff_sum += cliff
                 r.cliff_cnt += 1
             if self.props and not r.prop:
                 r.prop = any((x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2 < 1.0 for px, py, pz in self.props)
@@ -369,7 +380,7 @@ class RaceSim:
                 r.active = False
         self.tiles.update(data, t1)
         self.last_pos = pos
-        return self._observe(pos, vel, floors), all_terms, done, None
+        return self._observe(pos, vel, floors, cliffs), all_terms, done, None
 
     def _zones(self, r: Racer, i: int, x: float, y: float, feet: float, terms: list[float]) -> None:
         for k, (x0, x1, y0, y1, zz) in enumerate(self.archives):
@@ -404,7 +415,8 @@ class RaceSim:
         return spot
 
     # --- observation ---------------------------------------------------------------------
-    def _observe(self, pos: list[float], vel: list[float], floors: list[float]) -> dict[str, np.ndarray]:
+    def _observe(self, pos: list[float], vel: list[float], floors: list[float],
+                 cliffs: list[float] | None = None) -> dict[str, np.ndarray]:
         """Batched observations: dict of (N, ...) float32 arrays (see ``game_env.spaces``)."""
         n = self.n
         p = np.array(pos).reshape(n, 3)
@@ -429,7 +441,7 @@ class RaceSim:
                 g and (r.belt[0] != 0.0 or r.belt[1] != 0.0), r.on_pad, r.on_tile, r.sprint,
                 r.belt[0] * 0.2, r.belt[1] * 0.2, (ax - x) * 0.05, (ay - y) * 0.05, (az - z) * 0.05,
                 gx * 0.05, gy * 0.05, gz * 0.05, math.sqrt(gx * gx + gy * gy + gz * gz) * 0.02,
-                1.0 if fl < VOID / 2 else (feet - fl) * 0.2, self._cliff(pos, i) * 0.2,
+                1.0 if fl < VOID / 2 else (feet - fl) * 0.2, (cliffs[i] if cliffs is not None else self._cliff(pos, i)) * 0.2,
                 r.next_goal / ng if ng else 0.0, tf, r.prop, max(r.ready_t - t, 0.0) / COOLDOWN,
                 (t - r.anchor_t) / STAY_S,
             ))
