@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from scipy.ndimage import distance_transform_edt
 
 from game_env.course import Course
@@ -79,24 +80,23 @@ class CourseGrids:
         shape = [self.zone_ids[(0, 0)].shape, _pool(self.fine_h, VOID, ks[1]).shape,
                  self.zone_ids[(2, 0)].shape, self.zone_ids[(3, 0)].shape]
         chans = (5, 3, 2, 2)  # res 1: h, t, items, archive, goal; res 2: h, t, items; 4/16: zones
-        # All layers live in one flat buffer so that one gather builds every grid channel.
-        sizes = [num_racers * c * sh[0] * sh[1] for c, sh in zip(chans, shape, strict=True)]
-        self.buf = np.zeros(sum(sizes), np.float32)
-        offs = np.cumsum([0, *sizes])
-        self.stacks = [self.buf[o : o + sz].reshape(num_racers, c, *sh)
-                       for o, sz, c, sh in zip(offs[:-1], sizes, chans, shape, strict=True)]
+        # Every (layer, racer, channel) plane lives in one 2-D buffer of common width, so that a
+        # sliding-window view of it gives any 16x16 window of any plane: one fancy index then
+        # copies all twelve grid channels of all racers.
+        width = max(sh[1] for sh in shape)
+        rows = [num_racers * c * sh[0] for c, sh in zip(chans, shape, strict=True)]
+        self.buf = np.zeros((sum(rows), width), np.float32)
+        offs = np.cumsum([0, *rows])
+        self.stacks = [self.buf[o : o + nr].reshape(num_racers, c, sh[0], width)[..., : sh[1]]
+                       for o, nr, c, sh in zip(offs[:-1], rows, chans, shape, strict=True)]
+        self.windows = sliding_window_view(self.buf, (GRID, GRID))
         ny = np.array([sh[1] for sh in shape])
-        self.max_ix = np.array([sh[0] - GRID for sh in shape], np.int32)[:, None]
-        self.max_iy = (ny - GRID).astype(np.int32)[:, None]
-        self.lay_ny = ny[:, None].astype(np.int32)
+        self.max_ix = np.array([sh[0] - GRID for sh in shape], np.intp)[:, None]
+        self.max_iy = (ny - GRID).astype(np.intp)[:, None]
         out = [(0, 0), (0, 1), (1, 0), (1, 1), (0, 2), (1, 2), (0, 3), (2, 0), (3, 0), (0, 4), (2, 1), (3, 1)]
         self.layer_of = np.array([lay for lay, _ in out])
-        cell = np.arange(GRID)
-        self.base = np.stack([offs[lay] + ch * shape[lay][0] * shape[lay][1] + cell[:, None] * ny[lay] + cell[None]
-                              for lay, ch in out]).astype(np.int32)  # (12, 16, 16)
-        stride = np.array([chans[lay] * shape[lay][0] * shape[lay][1] for lay, _ in out])
-        self.racer_shift = (stride[:, None] * np.arange(num_racers)[None]).astype(np.int32)  # (12, N)
-        assert self.buf.size < 2**31
+        self.row_base = np.array([offs[lay] + (np.arange(num_racers) * chans[lay] + ch) * shape[lay][0]
+                                  for lay, ch in out], np.intp)  # (12, N)
         self.ox = self.origin[0][:, None]
         self.oy = self.origin[1][:, None]
         self.inv = self.inv_res[:, None]
@@ -242,16 +242,16 @@ class CourseGrids:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Batched grids for N racers: terrain (N,4,16,16), items (N,2,..), targets, goals (N,3,..).
 
-        One gather from the flat buffer builds all twelve channels; the four arrays are views.
+        One fancy index of the window view builds all twelve channels; the four arrays are views.
         """
-        ix = ((x[None] - self.ox) * self.inv).astype(np.int32)
-        iy = ((y[None] - self.oy) * self.inv).astype(np.int32)
+        ix = ((x[None] - self.ox) * self.inv).astype(np.intp)
+        iy = ((y[None] - self.oy) * self.inv).astype(np.intp)
         ix -= HALF
         iy -= HALF
         _clip(ix, 0, self.max_ix, out=ix)
         _clip(iy, 0, self.max_iy, out=iy)
-        shift = (ix * self.lay_ny + iy)[self.layer_of] + self.racer_shift  # (12, N)
-        out = self.buf.take(self.base[None] + shift.T[:, :, None, None])  # (N, 12, 16, 16)
+        lay = self.layer_of
+        out = self.windows[(self.row_base + ix[lay]).T, iy[lay].T]  # (N, 12, 16, 16)
         hts = out[:, 0:4:2]
         hts -= (feet * 0.2)[:, None, None, None]
         _clip(hts, -1.0, 1.0, out=hts)

@@ -101,9 +101,10 @@ class RaceParallelEnv(ParallelEnv):
         info = {"map_id": map_id, "course_seed": cseed}
         return self._split(obs, self.agents), {a: dict(info) for a in self.agents}
 
-    @staticmethod
-    def _split(obs: dict[str, np.ndarray], agents: list[str]) -> dict[str, dict[str, np.ndarray]]:
-        return {a: {k: v[int(a[6:])] for k, v in obs.items()} for a in agents}
+    def _split(self, obs: dict[str, np.ndarray], agents: list[str]) -> dict[str, dict[str, np.ndarray]]:
+        items = list(obs.items())
+        index = self._index
+        return {a: {k: v[index[a]] for k, v in items} for a in agents}
 
     def step(self, actions: dict[str, Any]):
         acts = self._idle_all.copy()
@@ -130,8 +131,9 @@ class RaceParallelEnv(ParallelEnv):
         if err is not None:
             warnings.warn(err, RuntimeWarning, stacklevel=2)
         rewards, terminations, truncations, infos = {}, {}, {}, {}
+        index = self._index
         for a in live:
-            i = int(a[6:])
+            i = index[a]
             tl = terms[i]
             info = {"reward_terms": dict(zip(REWARD_TERMS, tl, strict=True)), "map_id": sim.map_id,
                     "course_seed": sim.course_seed}
