@@ -191,9 +191,9 @@ class RaceEncoder(nn.Module):
             )
             for k in VECTOR_KEYS
         )
-        self.out_dim = len(MAP_KEYS) * cfg["map_embed_dim"] + len(VECTOR_KEYS) * cfg[
-            "vector_embed_dim"
-        ]
+        self.out_dim = (
+            len(MAP_KEYS) * cfg["map_embed_dim"] + len(VECTOR_KEYS) * cfg["vector_embed_dim"]
+        )
 
     def forward(self, obs: Mapping[str, torch.Tensor]) -> torch.Tensor:
         parts = [enc(obs[k].float()) for k, enc in zip(MAP_KEYS, self.maps, strict=True)]
