@@ -97,6 +97,9 @@ class CourseGrids:
         self.layer_of = np.array([lay for lay, _ in out])
         self.row_base = np.array([offs[lay] + (np.arange(num_racers) * chans[lay] + ch) * shape[lay][0]
                                   for lay, ch in out], np.intp)  # (12, N)
+        self.origin3 = self.origin[:, :, None]  # (2, 4, 1)
+        self.inv3 = self.inv_res[None, :, None]
+        self.max_ij = np.stack((self.max_ix, self.max_iy))  # (2, 4, 1)
         self.ox = self.origin[0][:, None]
         self.oy = self.origin[1][:, None]
         self.inv = self.inv_res[:, None]
@@ -244,15 +247,13 @@ class CourseGrids:
 
         One fancy index of the window view builds all twelve channels; the four arrays are views.
         """
-        ix = ((x[None] - self.ox) * self.inv).astype(np.intp)
-        iy = ((y[None] - self.oy) * self.inv).astype(np.intp)
-        ix -= HALF
-        iy -= HALF
-        _clip(ix, 0, self.max_ix, out=ix)
-        _clip(iy, 0, self.max_iy, out=iy)
+        ij = ((np.stack((x, y))[:, None, :] - self.origin3) * self.inv3).astype(np.intp)
+        ij -= HALF
+        _clip(ij, 0, self.max_ij, out=ij)  # (2, 4 layers, N)
         lay = self.layer_of
+        ix, iy = ij[0], ij[1]
         out = self.windows[(self.row_base + ix[lay]).T, iy[lay].T]  # (N, 12, 16, 16)
         hts = out[:, 0:4:2]
-        hts -= (feet * 0.2)[:, None, None, None]
+        hts -= (feet * 0.2).reshape(-1, 1, 1, 1)
         _clip(hts, -1.0, 1.0, out=hts)
         return out[:, 0:4], out[:, 4:6], out[:, 6:9], out[:, 9:12]

@@ -419,8 +419,8 @@ class RaceSim:
                  cliffs: list[float] | None = None) -> dict[str, np.ndarray]:
         """Batched observations: dict of (N, ...) float32 arrays (see ``game_env.spaces``)."""
         n = self.n
-        p = np.array(pos).reshape(n, 3)
-        terrain, items, targets, goals = self.grids.observe(p[:, 0], p[:, 1], p[:, 2] - FEET)
+        p = np.array(pos).reshape(n, 3).T
+        terrain, items, targets, goals = self.grids.observe(p[0], p[1], p[2] - FEET)
         t = self.data.time
         tf = self.steps / self.max_episode_steps
         ng = len(self.goal_pos) - 1
