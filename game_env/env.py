@@ -99,9 +99,8 @@ class ObstacleRaceEnv(gym.Env):
         return {k: v[0] for k, v in obs.items()}, {"map_id": map_id, "course_seed": cseed}
 
     def step(self, action):
-        a = check_action(action)[None]
         sim = self.sim
-        obs, terms, done, err = sim.step(a)
+        obs, terms, done, err = sim.step([check_action(action)])
         tl = terms[0]
         info: dict[str, Any] = {"reward_terms": dict(zip(REWARD_TERMS, tl, strict=True)),
                                 "map_id": sim.map_id, "course_seed": sim.course_seed}

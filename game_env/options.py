@@ -63,17 +63,24 @@ def check_reset_options(options: Any) -> dict[str, Any]:
     return out
 
 
-def check_action(action: Any) -> np.ndarray:
-    """One racer's action -> int64 array (8,), or ValueError naming the action."""
-    try:
-        a = np.asarray(action)
-        ok = a.shape == (8,) and a.dtype.kind in "iu" or (
-            a.shape == (8,) and a.dtype.kind == "f" and np.all(a == np.round(a)))
-    except Exception:  # noqa: BLE001 - anything unparsable is a bad action
-        ok = False
-    if not ok or not ((a >= 0) & (a < NVEC)).all():
-        raise ValueError(f"action {action!r} is outside the action space MultiDiscrete({list(ACTION_NVEC)})")
-    return a.astype(np.int64)
+_NVEC_LIST = list(ACTION_NVEC)
+
+
+def check_action(action: Any) -> list[int]:
+    """One racer's action -> list of 8 ints, or ValueError naming the action."""
+    vals = None
+    if type(action) is np.ndarray and action.shape == (8,) and action.dtype.kind in "iu":
+        vals = action.tolist()
+    else:
+        try:
+            a = np.asarray(action)
+            if a.shape == (8,) and (a.dtype.kind in "iu" or (a.dtype.kind == "f" and np.all(a == np.round(a)))):
+                vals = [int(v) for v in a.tolist()]
+        except (TypeError, ValueError, OverflowError):
+            vals = None
+    if vals is None or not all(0 <= v < n for v, n in zip(vals, _NVEC_LIST, strict=True)):
+        raise ValueError(f"action {action!r} is outside the action space MultiDiscrete({_NVEC_LIST})")
+    return vals
 
 
 __all__ = ["NUM_MAPS", "check_action", "check_map_choice"]

@@ -76,3 +76,8 @@ def check_course(course: Course) -> list[str] | None:
             return None
         modes.append(mode)
     return modes
+
+
+def is_reachable(course: Course) -> bool:
+    """Whether the reachability check accepts ``course`` (every edge has a feasible move)."""
+    return check_course(course) is not None

@@ -107,8 +107,8 @@ class RaceSim:
         self.geom2racer[idx.racer_geom] = np.arange(self.n)
         self.qpos_i = idx.racer_qpos
         self.qvel_i = idx.racer_qvel
-        self.qpos_flat = idx.racer_qpos.ravel()
-        self.qvel_flat = idx.racer_qvel.ravel()
+        self.qpos_flat = _as_slice(idx.racer_qpos.ravel())  # racers' x, y, z (contiguous: a slice)
+        self.qvel_flat = _as_slice(idx.racer_qvel.ravel())
         self.vz_adr = [int(a) for a in idx.racer_qvel[:, 2]]
         self.vxy_adr = [(int(a), int(b)) for a, b in idx.racer_qvel[:, :2]]
         self.ctrl_i = idx.racer_ctrl.ravel()
@@ -173,8 +173,8 @@ class RaceSim:
         return float(self.maps[0][ix, iy]), ix, iy
 
     # --- one env step ------------------------------------------------------------------
-    def step(self, actions: np.ndarray) -> tuple[dict[str, np.ndarray], list[list[float]], list[bool], str | None]:
-        """Advance one env step with (N, 8) actions.
+    def step(self, actions) -> tuple[dict[str, np.ndarray], list[list[float]], list[bool], str | None]:
+        """Advance one env step with (N, 8) actions (array or list of lists of valid ints).
 
         Returns (batched obs, reward terms per racer (N lists of 7 floats in
         ``spaces.REWARD_TERMS`` order), done per racer (reached the destination this step),
@@ -185,7 +185,9 @@ class RaceSim:
         half = 0.5 * self.frame_skip * self.model.opt.timestep
         qvel = data.qvel
         ctrl = []
-        for i, (r, a) in enumerate(zip(self.racers, actions.tolist(), strict=True)):
+        if isinstance(actions, np.ndarray):
+            actions = actions.tolist()
+        for i, (r, a) in enumerate(zip(self.racers, actions, strict=True)):
             if not r.active:
                 ctrl += (0.0, 0.0)
                 continue
@@ -425,7 +427,7 @@ class RaceSim:
         tf = self.steps / self.max_episode_steps
         ng = len(self.goal_pos) - 1
         cx, cy, cz = self.dest[:3]
-        rows, dests = [], []
+        rows = []
         for i, r in enumerate(self.racers):
             x, y, z = pos[3 * i: 3 * i + 3]
             vx, vy, vz = vel[3 * i: 3 * i + 3]
@@ -435,7 +437,7 @@ class RaceSim:
             gx, gy, gz = gx - x, gy - y, gz - z
             feet = z - FEET
             fl = floors[i]
-            rows.append((
+            rows.append([
                 x * self.inv_len - 1.0, y * 0.1, z * 0.1, math.sin(r.yaw), math.cos(r.yaw),
                 vx * 0.1, vy * 0.1, vz * 0.1, g, not g and vz > 0, not g and vz <= 0, t < r.knock_until,
                 g and (r.belt[0] != 0.0 or r.belt[1] != 0.0), r.on_pad, r.on_tile, r.sprint,
@@ -443,15 +445,12 @@ class RaceSim:
                 gx * 0.05, gy * 0.05, gz * 0.05, math.sqrt(gx * gx + gy * gy + gz * gz) * 0.02,
                 1.0 if fl < VOID / 2 else (feet - fl) * 0.2, (cliffs[i] if cliffs is not None else self._cliff(pos, i)) * 0.2,
                 r.next_goal / ng if ng else 0.0, tf, r.prop, max(r.ready_t - t, 0.0) / COOLDOWN,
-                (t - r.anchor_t) / STAY_S,
-            ))
-            dests.append(((cx - x) * 0.01, (cy - y) * 0.01, (cz - feet) * 0.01, *self.dest_static))
-        agent = np.array(rows, np.float32)
-        _clip(agent, -1.0, 1.0, out=agent)
-        dest = np.array(dests, np.float32)
-        _clip(dest, -1.0, 1.0, out=dest)
-        return {"terrain": terrain, "items": items, "targets": targets, "goals": goals, "agent": agent,
-                "destination": dest}
+                (t - r.anchor_t) / STAY_S, (cx - x) * 0.01, (cy - y) * 0.01, (cz - feet) * 0.01,
+            ] + self.dest_static)
+        vec = np.array(rows, np.float32)
+        _clip(vec, -1.0, 1.0, out=vec)
+        return {"terrain": terrain, "items": items, "targets": targets, "goals": goals, "agent": vec[:, :32],
+                "destination": vec[:, 32:]}
 
     def _cliff(self, pos: list[float], i: int) -> float:
         _, ix, iy = self._floor(pos, i)
@@ -471,3 +470,10 @@ class RaceSim:
             "total_reward": r.total_reward,
             "episode_length": float(r.length),
         }
+
+
+def _as_slice(idx: np.ndarray) -> slice | np.ndarray:
+    """A slice when ``idx`` is a contiguous ascending run (cheaper to index with)."""
+    if idx.size and (np.diff(idx) == 1).all():
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx

@@ -8,7 +8,7 @@ import pytest
 
 from game_env import NUM_MAPS, generate_course
 from game_env.course import Surface
-from game_env.reachability import check_course, edge_mode
+from game_env.reachability import check_course, edge_mode, is_reachable
 from game_env.scene import course_xml
 
 
@@ -21,7 +21,7 @@ def test_same_map_and_seed_give_byte_identical_mjcf():
 def test_every_map_passes_reachability_for_20_seeds(map_id):
     for seed in range(20):
         course = generate_course(map_id, seed)
-        assert check_course(course) == course.edges
+        assert check_course(course) == course.edges and is_reachable(course)
         assert len(course.edges) == len(course.surfaces) - 1
 
 
