@@ -132,3 +132,23 @@ def test_parallel_physics_blow_up_truncates_every_racer():
 def test_import_game_env_imports_neither_ray_nor_torch():
     code = "import sys, game_env; import game_env.scripted; assert 'ray' not in sys.modules and 'torch' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True, cwd=str(__import__("pathlib").Path(__file__).parents[2]))
+
+
+@pytest.mark.parametrize("map_id", range(10))
+def test_random_play_keeps_observations_in_space_on_every_map(map_id):
+    env = ObstacleRaceEnv(map_id=map_id, course_seed=map_id, max_episode_steps=150)
+    obs, _ = env.reset(seed=map_id)
+    rng = np.random.default_rng(map_id)
+    for _ in range(150):
+        action = rng.integers(0, env.action_space.nvec)
+        action[0] = 2 if rng.random() < 0.7 else action[0]  # mostly forward: reach the hazards
+        obs, reward, term, trunc, info = env.step(action)
+        assert env.observation_space.contains(obs), {k: (v.min(), v.max()) for k, v in obs.items()}
+        assert np.isfinite(reward) and "physics_error" not in info
+        if term or trunc:
+            break
+    assert trunc or term
+
+
+def test_check_env_with_rgb_array_rendering():
+    check_env(ObstacleRaceEnv(map_id=1, render_mode="rgb_array", width=64, height=48, max_episode_steps=30))
