@@ -7,7 +7,8 @@
   ``max_episode_steps``, ...; multi-racer also ``num_racers``).
 - `race_ppo_config(...)` returns a PPOConfig with the race network (`RaceNetModule`), one
   shared policy ``"shared"`` for all racers in multi-racer mode, and `RaceMetricsCallback`.
-  Call `rllib_asor.with_asor(config, ...)` on it afterwards: with_asor keeps the callback.
+  Call `rllib_asor.with_asor(config, obs_keys=RACE_ASOR_OBS_KEYS, ...)` on it afterwards:
+  with_asor keeps the callback.
 - `RaceMetricsCallback` logs the paper's per-episode metrics as ``race/...`` in the results.
 """
 
@@ -43,6 +44,9 @@ RACE_METRICS: dict[str, str] = {
     "goal_reward": "goal_reward",
 }
 """``race/<name>`` ← ``info["episode_metrics"][<key>]`` (one value per racer and episode)."""
+RACE_ASOR_OBS_KEYS: list[str] = ["agent", "destination"]
+"""Observation keys ASOR's discriminator and RND see on the race (41 dense floats; why:
+docs/race_training.md). Pass as `with_asor(config, obs_keys=RACE_ASOR_OBS_KEYS, ...)`."""
 METRICS_WINDOW = 100
 """Racer-episodes each ``race/...`` mean is taken over."""
 

@@ -10,6 +10,7 @@ import rllib_asor
 from rllib_asor.rllib.callbacks import AsorMetricsCallback
 from rllib_asor.rllib.race import (
     MULTI_ENV,
+    RACE_ASOR_OBS_KEYS,
     RACE_METRICS,
     SHARED_POLICY,
     RaceMetricsCallback,
@@ -18,7 +19,6 @@ from rllib_asor.rllib.race import (
     race_ppo_config,
 )
 
-OBS_KEYS = ["agent", "destination", "goals"]
 ASOR_KEYS = ("disc_loss", "disc_acc", "aug_reward_mean", "real_fraction", "rnd_loss", "lambda")
 
 
@@ -32,14 +32,14 @@ def one_torch_thread():
     torch.set_num_threads(threads)
 
 
-def tiny_race_ppo(num_racers):
+def tiny_race_ppo(num_racers, obs_keys):
     config = (
         race_ppo_config(num_racers=num_racers, map_id=0, max_episode_steps=40)
         .env_runners(num_env_runners=0)
         .training(train_batch_size=200, minibatch_size=100, num_epochs=1)
         .debugging(seed=0)
     )
-    return rllib_asor.with_asor(config, lambda_=0.01, obs_keys=OBS_KEYS, seed=0)
+    return rllib_asor.with_asor(config, lambda_=0.01, obs_keys=obs_keys, seed=0)
 
 
 def check_result(result, policy):
@@ -57,7 +57,7 @@ def check_result(result, policy):
 
 
 def test_single_racer_ppo_asor_iteration_reports_asor_and_race_metrics(ray_session):
-    config = tiny_race_ppo(1)
+    config = tiny_race_ppo(1, RACE_ASOR_OBS_KEYS)
     assert config.callbacks_class == [RaceMetricsCallback, AsorMetricsCallback]
     algo = config.build_algo()
     try:
@@ -68,19 +68,23 @@ def test_single_racer_ppo_asor_iteration_reports_asor_and_race_metrics(ray_sessi
             "asor_proxy.default_policy",
         }
         assert type(module["default_policy"]).__name__ == "RaceNetModule"
-        # The discriminator sees agent (32) + destination (9) + goals (3·16·16).
-        assert module["asor_disc.default_policy"].feature_dim == 32 + 9 + 768
+        # The discriminator and RND see agent (32) + destination (9).
+        assert module["asor_disc.default_policy"].feature_dim == 32 + 9
+        assert module["asor_proxy.default_policy"].feature_dim == 32 + 9
         check_result(algo.train(), "default_policy")
     finally:
         algo.stop()
 
 
 def test_two_racers_share_one_policy_and_report_asor_and_race_metrics(ray_session):
-    config = tiny_race_ppo(2)
+    config = tiny_race_ppo(2, ["agent", "destination", "goals"])
     assert config.env == MULTI_ENV and set(config.policies) == {SHARED_POLICY}
     algo = config.build_algo()
     try:
-        assert set(algo.learner_group._learner.module.keys()) == {
+        module = algo.learner_group._learner.module
+        # A grid key works too: agent (32) + destination (9) + goals (3·16·16).
+        assert module[f"asor_disc.{SHARED_POLICY}"].feature_dim == 32 + 9 + 768
+        assert set(module.keys()) == {
             SHARED_POLICY,
             f"asor_disc.{SHARED_POLICY}",
             f"asor_proxy.{SHARED_POLICY}",
