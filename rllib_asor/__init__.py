@@ -1,14 +1,16 @@
 """rllib-asor: ASOR (ICML 2025) as an add-on for Ray RLlib's new API stack.
 
 `rllib_asor.with_asor(algo_config, **settings)` switches ASOR on for an RLlib config;
-`rllib_asor.asor` holds the method itself (torch + numpy, no ray).
+`rllib_asor.AsorConfig` holds the settings; `rllib_asor.asor` is the method itself (torch +
+numpy, no ray). Imports are lazy so `import rllib_asor.envs` stays light.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rllib_asor.asor.config import AsorConfig
+if TYPE_CHECKING:
+    from rllib_asor.asor.config import AsorConfig
 
 __all__ = ["AsorConfig", "with_asor"]
 __version__ = "0.1.0"
@@ -19,3 +21,11 @@ def with_asor(algo_config: Any, **asor_settings: Any) -> Any:
     from rllib_asor.rllib.wiring import with_asor as _with_asor
 
     return _with_asor(algo_config, **asor_settings)
+
+
+def __getattr__(name: str) -> Any:
+    if name == "AsorConfig":
+        from rllib_asor.asor.config import AsorConfig
+
+        return AsorConfig
+    raise AttributeError(f"module 'rllib_asor' has no attribute {name!r}")

@@ -11,8 +11,11 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium as gym
 import torch
+from ray.rllib.algorithms.cql.torch.cql_torch_learner import CQLTorchLearner
 from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
+from ray.rllib.algorithms.sac.torch.sac_torch_learner import SACTorchLearner
 from ray.rllib.connectors.common.add_observations_from_episodes_to_batch import (
     AddObservationsFromEpisodesToBatch,
 )
@@ -20,10 +23,12 @@ from ray.rllib.connectors.learner import GeneralAdvantageEstimation
 from ray.rllib.connectors.learner.add_next_observations_from_episodes_to_train_batch import (
     AddNextObservationsFromEpisodesToTrainBatch,
 )
+from ray.rllib.core.columns import Columns
+from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from rllib_asor.asor.config import AsorConfig
-from rllib_asor.rllib.connector import AsorRewardConnector, AuxModuleIds
+from rllib_asor.rllib.connector import AsorRewardConnector, AuxModuleIds, critic_values
 
 DISC_PREFIX = "asor_disc."
 PROXY_PREFIX = "asor_proxy."
@@ -49,6 +54,8 @@ class AsorLearnerMixin:
 
     asor_insert_before: type | None = GeneralAdvantageEstimation
     """The piece ASOR must precede (None: append at the end of the pipeline)."""
+    asor_in_pipeline: bool = True
+    """False where batches bypass the Learner connector (offline); then `_update` applies it."""
 
     def build(self) -> None:
         super().build()  # type: ignore[misc]
@@ -67,29 +74,36 @@ class AsorLearnerMixin:
                 "ASOR learner: no discriminator module found in the MultiRLModule; "
                 "build the config with rllib_asor.with_asor(config, ...)"
             )
-        pipeline = self._learner_connector
-        if pipeline is None:
-            raise ValueError(
-                "ASOR needs the Learner connector pipeline; set num_aggregator_actors_per_learner=0"
-            )
-        if self.asor.proxy == "ensemble" and self.asor.needs_proxy:
-            pipeline.insert_after(
-                AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch()
-            )
-        piece = AsorRewardConnector(
+        self._asor_piece = AsorRewardConnector(
             asor=self.asor,
             aux_ids=aux,
             timestep_fn=lambda: self._asor_timestep,
             **self.asor_connector_kwargs(),
         )
+        if self.asor_in_pipeline:
+            self._insert_asor_piece()
+
+    def _insert_asor_piece(self) -> None:
+        pipeline = self._learner_connector
+        if pipeline is None:
+            raise ValueError(
+                "ASOR needs the Learner connector pipeline; set num_aggregator_actors_per_learner=0"
+            )
+        needs_next_obs = self.asor.proxy == "ensemble" and self.asor.needs_proxy
+        if needs_next_obs and not any(
+            isinstance(c, AddNextObservationsFromEpisodesToTrainBatch) for c in pipeline.connectors
+        ):
+            pipeline.insert_after(
+                AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch()
+            )
         if self.asor_insert_before is None:
-            pipeline.append(piece)
+            pipeline.append(self._asor_piece)
         else:
-            pipeline.insert_before(self.asor_insert_before, piece)
+            pipeline.insert_before(self.asor_insert_before, self._asor_piece)
 
     def asor_connector_kwargs(self) -> dict[str, Any]:
         """Extra keyword arguments for the connector (e.g. a `value_fn` for off-policy)."""
-        return {}
+        return {"value_fn": critic_values}
 
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
         super().before_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
@@ -111,3 +125,51 @@ class AsorLearnerMixin:
 
 class AsorPPOTorchLearner(AsorLearnerMixin, PPOTorchLearner):
     """PPO's torch Learner with ASOR's reward augmentation before GAE."""
+
+
+def soft_q_state_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
+    """V(s) for SAC/CQL modules: min over the twin critics of Q(s, π(s)).
+
+    Continuous actions: π's deterministic action; discrete: the expectation under π.
+    """
+    obs = {Columns.OBS: batch[Columns.OBS]}
+    logits = module.pi(module.pi_encoder(obs)[ENCODER_OUT])
+    if isinstance(module.action_space, gym.spaces.Discrete):
+        q_all = module.compute_q_values(obs, squeeze=False)
+        return (torch.softmax(logits, dim=-1) * q_all).sum(-1)
+    action = module.get_train_action_dist_cls().from_logits(logits).to_deterministic().sample()
+    return module.compute_q_values({**obs, Columns.ACTIONS: action})
+
+
+class _SoftQAsorMixin(AsorLearnerMixin):
+    """SAC-family Learners: V(s) from the critics; aux losses fed to SAC's per-optimizer
+    gradient loop (it pops `_temp_losses[(module_id, "<optimizer>_loss")]`)."""
+
+    asor_insert_before = None  # after NumpyToTensor, at the end of the pipeline (no GAE)
+
+    def asor_connector_kwargs(self) -> dict[str, Any]:
+        return {"value_fn": soft_q_state_values}
+
+    def compute_losses(self, *, fwd_out: dict[str, Any], batch: dict[str, Any]) -> dict[str, Any]:
+        losses = super().compute_losses(fwd_out=fwd_out, batch=batch)  # type: ignore[misc]
+        for module_id, loss in losses.items():
+            if is_aux_module(module_id):
+                self._temp_losses[(module_id, "default_optimizer_loss")] = loss
+        return losses
+
+
+class AsorSACTorchLearner(_SoftQAsorMixin, SACTorchLearner):
+    """SAC's torch Learner with ASOR; with `n_step > 1` the bonus is added to the n-step sum
+    once (for s_t), an approximation of Σ γ^k λ·b(s_{t+k})."""
+
+
+class AsorCQLTorchLearner(_SoftQAsorMixin, CQLTorchLearner):
+    """CQL (offline) with ASOR. Offline batches come through Ray Data's `OfflinePreLearner`,
+    where connector pieces added in `build()` never run, so the ASOR piece is applied to each
+    batch in `_update`, before the losses."""
+
+    asor_in_pipeline = False
+
+    def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
+        self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)
+        return super()._update(batch, **kwargs)

@@ -22,14 +22,16 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.rllib.callbacks import AsorMetricsCallback
 from rllib_asor.rllib.learners import (
+    AsorCQLTorchLearner,
     AsorPPOTorchLearner,
+    AsorSACTorchLearner,
     disc_module_id,
     is_aux_module,
     proxy_module_id,
 )
 from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 
-SUPPORTED = {"PPO": AsorPPOTorchLearner}
+SUPPORTED = {"PPO": AsorPPOTorchLearner, "SAC": AsorSACTorchLearner, "CQL": AsorCQLTorchLearner}
 
 
 class AsorMultiRLModuleSpec(MultiRLModuleSpec):
@@ -47,11 +49,6 @@ class AsorMultiRLModuleSpec(MultiRLModuleSpec):
                     spec.observation_space = spec.observation_space or policy.observation_space
                     spec.action_space = spec.action_space or policy.action_space
         return super().build(module_id)
-
-
-def register_learner(algo_name: str, learner_class: type) -> None:
-    """Make `with_asor` support another algorithm (used by the SAC/offline integrations)."""
-    SUPPORTED[algo_name] = learner_class
 
 
 def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
