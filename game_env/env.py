@@ -71,13 +71,17 @@ class ObstacleRaceEnv(gym.Env):
 
     @property
     def data(self) -> mujoco.MjData:
+        """The MuJoCo data of the current episode."""
         return self.sim.data
 
     @property
     def map_id(self) -> int:
+        """The map of the current episode."""
         return self.sim.map_id
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Start an episode; ``options`` may fix ``map_id`` and/or ``course_seed`` for it."""
         super().reset(seed=seed)
         opts = check_reset_options(options)
@@ -98,7 +102,8 @@ class ObstacleRaceEnv(gym.Env):
         self._done = False
         return {k: v[0] for k, v in obs.items()}, {"map_id": map_id, "course_seed": cseed}
 
-    def step(self, action):
+    def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """One env step; ``info`` carries ``reward_terms``, ``map_id`` (and metrics at the end)."""
         sim = self.sim
         obs, terms, done, err = sim.step([check_action(action)])
         tl = terms[0]
@@ -126,6 +131,7 @@ class ObstacleRaceEnv(gym.Env):
         return self._renderer.chase(self.sim.data, self.sim.pos[0])
 
     def close(self) -> None:
+        """Free the renderer."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None

@@ -6,7 +6,9 @@ import functools
 import warnings
 from typing import Any
 
+import mujoco
 import numpy as np
+from gymnasium import spaces as gym_spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
@@ -65,22 +67,29 @@ class RaceParallelEnv(ParallelEnv):
         self._live: set[str] = set()
 
     @functools.cache  # noqa: B019 - PettingZoo wants the same object per agent
-    def observation_space(self, agent: str):
+    def observation_space(self, agent: str) -> gym_spaces.Dict:
+        """The (same, cached) observation space of every racer."""
         return observation_space()
 
     @functools.cache  # noqa: B019
-    def action_space(self, agent: str):
+    def action_space(self, agent: str) -> gym_spaces.MultiDiscrete:
+        """The (same, cached) action space of every racer."""
         return action_space()
 
     @property
-    def model(self):
+    def model(self) -> mujoco.MjModel:
+        """The MuJoCo model of the current course."""
         return self.sim.model
 
     @property
-    def data(self):
+    def data(self) -> mujoco.MjData:
+        """The MuJoCo data of the current episode."""
         return self.sim.data
 
-    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, dict[str, Any]]]:
+        """Start an episode: every racer on the start pad (``options`` as the Gymnasium env)."""
         if seed is not None:
             self._rng, _ = seeding.np_random(seed)
         opts = check_reset_options(options)
@@ -106,7 +115,8 @@ class RaceParallelEnv(ParallelEnv):
         index = self._index
         return {a: {k: v[index[a]] for k, v in items} for a in agents}
 
-    def step(self, actions: dict[str, Any]):
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """One env step for every live racer; missing racers stand idle."""
         acts = self._idle_all.copy()
         try:  # fast path: every value already a valid int action
             live = [a for a in actions if a in self._live]
@@ -162,6 +172,7 @@ class RaceParallelEnv(ParallelEnv):
         return self._renderer.chase(self.sim.data, pos[int(np.argmax(pos[:, 0]))])
 
     def close(self) -> None:
+        """Free the renderer."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
