@@ -9,13 +9,20 @@ from ray.rllib.algorithms.ppo import PPOConfig
 
 import rllib_asor
 import rllib_asor.envs  # noqa: F401  (registers rllib_asor/LavaWorld-v0)
+from rllib_asor.cli.envs import register_with_tune
 
 LAVA = "rllib_asor/LavaWorld-v0"
 ASOR_KEYS = ("disc_loss", "disc_acc", "aug_reward_mean", "real_fraction", "rnd_loss")
 
 
 def lava_ppo_asor(env: str = LAVA, env_config: dict | None = None, **runners: Any) -> Any:
-    """PPO+ASOR on the lava world, 2 remote EnvRunners, tiny batches (seconds per iteration)."""
+    """PPO+ASOR on the lava world, 2 remote EnvRunners, tiny batches (seconds per iteration).
+
+    Call it after `ray.init`: a gymnasium id of ours is registered with Tune (as `rllib train`
+    does) so that remote EnvRunners, which never imported `rllib_asor.envs`, can build it.
+    """
+    if env == LAVA:
+        register_with_tune(LAVA)
     config = (
         PPOConfig()
         .environment(env, env_config=env_config or {})
