@@ -394,12 +394,28 @@ def validate_asor(exp: Experiment) -> None:
 
 
 def validate_env(exp: Experiment) -> None:
+    """The env id must be registered, and the env must build with each `env_config` candidate."""
+    import gymnasium as gym
+
     from rllib_asor.cli import envs
 
     with _quiet():
         if not envs.env_exists(exp.env):
             raise UsageError(f"unknown env id {exp.env!r}; allowed: {envs.known_ids()}",
                              source=exp.source, key=f"{exp.name}.env")
+        if exp.env not in gym.registry:
+            return  # registered with Tune by someone else: built only on the env runners
+        tree = exp.config.get("env_config") or {}
+        points: list[dict[grid.Path, Any]] = [{}]
+        for path, candidates in grid.find_grids(tree):
+            points += [{path: c} for c in candidates[1:]]
+        for choice in points:
+            env_config = grid.with_candidates(tree, choice)
+            try:
+                envs.make_env(exp.env, env_config).close()
+            except Exception as e:
+                raise UsageError(f"{exp.env} cannot be built with {env_config!r}: {_one_line(e)}",
+                                 source=exp.source, key=f"{exp.name}.config.env_config") from None
 
 
 def validate(exp: Experiment) -> Any:

@@ -22,7 +22,10 @@ class ProgressReporter(CLIReporter):
     """CLIReporter that adds a column for each `asor/...` metric it sees in the results."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(metric_columns=dict(BASE_COLUMNS), max_report_frequency=10, **kwargs)
+        # print_intermediate_tables defaults to "Tune's global verbosity >= 3 at construction",
+        # which a previous run in the same process lowers: ask for the table explicitly.
+        super().__init__(metric_columns=dict(BASE_COLUMNS), max_report_frequency=10,
+                         print_intermediate_tables=True, **kwargs)
         self._asor_seen: set[str] = set()
 
     def report(self, trials: list[Any], done: bool, *sys_info: str) -> None:

@@ -46,7 +46,7 @@ def ray_session() -> Iterator[None]:
     os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
     started = not ray.is_initialized()
     if started:
-        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+        ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield
     if started:
         ray.shutdown()

@@ -1,0 +1,147 @@
+"""Real tiny runs (Ray, Tune, RLlib; no mocks): train --test, evaluate, --resume, ASOR, failure.
+
+All tests share one Ray session (`ray_session`) and call the CLI in-process with `main([...])`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from rllib_asor.cli.main import main
+
+REPO = Path(__file__).resolve().parents[2]
+
+LEGACY_CARTPOLE = """
+cartpole-legacy:
+  env: CartPole-v1
+  run: PPO
+  stop: {episode_reward_mean: 150, timesteps_total: 100000}
+  config:
+    lr: 0.0003
+    num_workers: 2
+    num_sgd_iter: 6
+    sgd_minibatch_size: 128
+    model: {fcnet_hiddens: [32, 32]}
+  checkpoint_freq: 1
+"""
+
+
+def run_cli(argv: list[str]) -> SimpleNamespace:
+    """main(argv) with stdout/stderr captured (works in module-scoped fixtures)."""
+    out, err = io.StringIO(), io.StringIO()
+    t0 = time.monotonic()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    return SimpleNamespace(rc=rc, out=out.getvalue(), err=err.getvalue(),
+                           seconds=time.monotonic() - t0)
+
+
+def trial_dirs(experiment_dir: Path) -> list[Path]:
+    return sorted(p for p in experiment_dir.iterdir() if p.is_dir())
+
+
+def last_result(trial_dir: Path) -> dict:
+    lines = (trial_dir / "result.json").read_text().strip().splitlines()
+    return json.loads(lines[-1])
+
+
+@pytest.fixture(scope="module")
+def cartpole(tmp_path_factory, ray_session) -> SimpleNamespace:
+    """One `rllib train file legacy.yaml --test` run on CartPole-v1."""
+    root = tmp_path_factory.mktemp("cartpole")
+    path = root / "legacy.yaml"
+    path.write_text(LEGACY_CARTPOLE)
+    storage = root / "results"
+    res = run_cli(["train", "file", str(path), "--test", "--storage-path", str(storage)])
+    res.yaml, res.storage, res.exp_dir = str(path), storage, storage / "cartpole-legacy"
+    return res
+
+
+def test_train_test_mode_exits_0_and_writes_checkpoint(cartpole):
+    assert cartpole.rc == 0, cartpole.err[-2000:]
+    [trial] = trial_dirs(cartpole.exp_dir)
+    checkpoints = sorted(trial.glob("checkpoint_*"))
+    assert checkpoints and (checkpoints[-1] / "rllib_checkpoint.json").is_file()
+    result = last_result(trial)
+    assert result["training_iteration"] == 2  # --test budget
+    assert result["num_env_steps_sampled_lifetime"] > 0
+    assert result["config"]["num_env_runners"] == 2
+    assert result["config"]["num_cpus_per_env_runner"] == 0.5
+    assert result["config"]["_model_config"] == {"fcnet_hiddens": [32, 32]}
+
+
+def test_train_prints_legacy_warnings_progress_table_and_summary(cartpole):
+    assert "rllib: warning:" in cartpole.err
+    assert "'num_sgd_iter' translated to 'num_epochs'" in cartpole.err
+    assert "env steps" in cartpole.out and "return mean" in cartpole.out
+    assert "rllib: cartpole-legacy: 1 trial(s), 0 errored" in cartpole.out
+    assert "checkpoint=" + str(cartpole.exp_dir) in cartpole.out
+
+
+def test_evaluate_checkpoint_json(cartpole):
+    [trial] = trial_dirs(cartpole.exp_dir)
+    checkpoint = sorted(trial.glob("checkpoint_*"))[-1]
+    res = run_cli(["evaluate", str(checkpoint), "--episodes", "3", "--json"])
+    assert res.rc == 0, res.err[-2000:]
+    stats = json.loads(res.out.strip().splitlines()[-1])
+    assert stats["episodes"] == 3 and len(stats["returns"]) == 3
+    assert stats["env"] == "CartPole-v1"
+    assert stats["return_mean"] == pytest.approx(sum(stats["returns"]) / 3)
+    assert all(r >= 8 for r in stats["returns"])  # CartPole pays 1 per step, >= 8 steps
+
+
+def test_evaluate_finds_latest_checkpoint_in_experiment_dir(cartpole):
+    res = run_cli(["evaluate", str(cartpole.exp_dir), "--episodes", "2"])
+    assert res.rc == 0, res.err[-2000:]
+    assert "return: mean" in res.out and "episode returns:" in res.out
+    assert "checkpoint_" in res.out
+
+
+def test_resume_finished_experiment_exits_0_without_new_trials(cartpole):
+    before = trial_dirs(cartpole.exp_dir)
+    res = run_cli(["train", "file", cartpole.yaml, "--test", "--storage-path",
+                   str(cartpole.storage), "--resume"])
+    assert res.rc == 0, res.err[-2000:]
+    assert trial_dirs(cartpole.exp_dir) == before
+    assert last_result(before[0])["training_iteration"] == 2
+
+
+def test_asor_lava_example_test_run_reports_asor_metrics(tmp_path, ray_session):
+    res = run_cli(["train", "file", str(REPO / "tuned_examples/lava/ppo-asor.yaml"), "--test",
+                   "--storage-path", str(tmp_path)])
+    assert res.rc == 0, res.err[-3000:]
+    [trial] = trial_dirs(tmp_path / "lava-ppo-asor")
+    assert trial.name.startswith("AsorPPO_")
+    params = json.loads((trial / "params.json").read_text())  # the trial's resolved param space
+    assert params["asor"] == {"mode": "asor", "lambda_": 0.01, "rho_value": 0.5,
+                              "rho_count": 0.5, "proxy": "rnd", "reward_form": "log"}
+    result = last_result(trial)
+    assert 0.0 <= result["asor"]["disc_acc"] <= 1.0
+    assert "asor/disc_acc" in res.out  # progress-table column
+
+
+def test_failing_trial_exits_1(tmp_path, write_yaml, ray_session):
+    import gymnasium as gym
+    from ray import tune
+
+    def failing_env(env_config):
+        raise RuntimeError("this env always fails to build")
+
+    tune.register_env("cli-test/AlwaysFails-v0", failing_env)
+    assert "cli-test/AlwaysFails-v0" not in gym.registry
+    path = write_yaml("""
+        fails:
+          env: cli-test/AlwaysFails-v0
+          run: PPO
+          config: {restart_failed_env_runners: false}
+    """)
+    res = run_cli(["train", "file", path, "--test", "--storage-path", str(tmp_path)])
+    assert res.rc == 1
+    assert "1 errored" in res.out
