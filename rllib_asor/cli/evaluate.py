@@ -67,6 +67,21 @@ def _local_config(path: str, seed: int | None) -> dict[str, Any]:
     return config
 
 
+def _unreadable_file(path: str) -> tuple[str, str] | None:
+    """(file, reason) for the first state file under `path` that does not unpickle."""
+    for root, _, files in sorted(os.walk(path)):
+        for name in sorted(files):
+            if not name.endswith(".pkl"):
+                continue
+            full = os.path.join(root, name)
+            try:
+                with open(full, "rb") as f:
+                    pickle.load(f)
+            except Exception as e:
+                return full, f"{type(e).__name__}: {' '.join(str(e).split())[:120]}"
+    return None
+
+
 def evaluate(path: str, episodes: int, explore: bool = False, seed: int | None = None
              ) -> dict[str, Any]:
     """Restore the algorithm at `path` and run `episodes` episodes; return the statistics."""
@@ -79,6 +94,9 @@ def evaluate(path: str, episodes: int, explore: bool = False, seed: int | None =
     env_id = config.get("env")
     if isinstance(env_id, str):
         envs.register_with_tune(env_id)
+    bad = _unreadable_file(path)  # before Ray starts: one clean line naming the file
+    if bad is not None:
+        raise UsageError(f"cannot be read, the checkpoint is damaged ({bad[1]})", source=bad[0])
     start_ray(None, 1)
     algo = Algorithm.from_checkpoint(path, config=config)
     try:

@@ -29,7 +29,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report}")
     sub.required = True
-    p_train = sub.add_parser("train", help="train from a YAML file or --run/--env flags")
+    p_train = sub.add_parser(
+        "train",
+        help="train from a YAML file or --run/--env flags",
+        usage="rllib train file PATH [options]\n       rllib train --run ALGO --env ID "
+        "[--config JSON] [options]",
+    )
     train.add_arguments(p_train)
     p_train.set_defaults(func=train.run)
     p_eval = sub.add_parser("evaluate", help="run episodes with a trained checkpoint")

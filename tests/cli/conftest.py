@@ -39,14 +39,14 @@ def write_yaml(tmp_path: Path) -> Callable[[str, str], str]:
 
 
 @pytest.fixture(scope="session")
-def ray_session() -> Iterator[None]:
-    """One local Ray for every end-to-end CLI test (the CLI reuses an initialised Ray)."""
+def cli_ray() -> Iterator[None]:
+    """One local Ray (4 logical CPUs, like tests/conftest.py's `ray_session`) for every
+    end-to-end CLI test; the CLI reuses an initialised Ray. `address="local"` keeps a cluster
+    someone else started on this machine out of it. Left running for later tests, as the shared
+    fixture does."""
     import ray
 
     os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
-    started = not ray.is_initialized()
-    if started:
-        ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
+    if not ray.is_initialized():
+        ray.init(address="local", num_cpus=4, include_dashboard=False, log_to_driver=False)
     yield
-    if started:
-        ray.shutdown()

@@ -1,6 +1,6 @@
 """Real tiny runs (Ray, Tune, RLlib; no mocks): train --test, evaluate, --resume, ASOR, failure.
 
-All tests share one Ray session (`ray_session`) and call the CLI in-process with `main([...])`.
+All tests share one Ray session (`cli_ray`) and call the CLI in-process with `main([...])`.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def last_result(trial_dir: Path) -> dict:
 
 
 @pytest.fixture(scope="module")
-def cartpole(tmp_path_factory, ray_session) -> SimpleNamespace:
+def cartpole(tmp_path_factory, cli_ray) -> SimpleNamespace:
     """One `rllib train file legacy.yaml --test` run on CartPole-v1."""
     root = tmp_path_factory.mktemp("cartpole")
     path = root / "legacy.yaml"
@@ -113,7 +113,7 @@ def test_resume_finished_experiment_exits_0_without_new_trials(cartpole):
     assert last_result(before[0])["training_iteration"] == 2
 
 
-def test_asor_lava_example_test_run_reports_asor_metrics(tmp_path, ray_session):
+def test_asor_lava_example_test_run_reports_asor_metrics(tmp_path, cli_ray):
     res = run_cli(["train", "file", str(REPO / "tuned_examples/lava/ppo-asor.yaml"), "--test",
                    "--storage-path", str(tmp_path)])
     assert res.rc == 0, res.err[-3000:]
@@ -127,7 +127,7 @@ def test_asor_lava_example_test_run_reports_asor_metrics(tmp_path, ray_session):
     assert "asor/disc_acc" in res.out  # progress-table column
 
 
-def test_failing_trial_exits_1(tmp_path, write_yaml, ray_session):
+def test_failing_trial_exits_1(tmp_path, write_yaml, cli_ray):
     import gymnasium as gym
     from ray import tune
 
@@ -145,3 +145,17 @@ def test_failing_trial_exits_1(tmp_path, write_yaml, ray_session):
     res = run_cli(["train", "file", path, "--test", "--storage-path", str(tmp_path)])
     assert res.rc == 1
     assert "1 errored" in res.out
+
+
+def test_evaluate_damaged_checkpoint_exits_2_naming_the_file(cartpole, tmp_path):
+    import shutil
+
+    [trial] = trial_dirs(cartpole.exp_dir)
+    copy = tmp_path / "checkpoint_copy"
+    shutil.copytree(sorted(trial.glob("checkpoint_*"))[-1], copy)
+    target = copy / "learner_group/learner/rl_module/default_policy/module_state.pkl"
+    target.write_bytes(target.read_bytes()[: target.stat().st_size // 2])
+    res = run_cli(["evaluate", str(copy), "--episodes", "1"])
+    assert res.rc == 2
+    lines = res.err.strip().splitlines()
+    assert len(lines) == 1 and str(target) in lines[0] and "damaged" in lines[0], res.err
