@@ -98,6 +98,7 @@ class CourseGrids:
         self.row_base = np.array([offs[lay] + (np.arange(num_racers) * chans[lay] + ch) * shape[lay][0]
                                   for lay, ch in out], np.intp)  # (12, N)
         self.origin3 = self.origin[:, :, None]  # (2, 4, 1)
+        self.corner3 = self.origin3 + HALF * self.res[None, :, None]  # origin of the window corner
         self.inv3 = self.inv_res[None, :, None]
         self.max_ij = np.stack((self.max_ix, self.max_iy))  # (2, 4, 1)
         self.ox = self.origin[0][:, None]
@@ -243,17 +244,22 @@ class CourseGrids:
     def observe(
         self, x: np.ndarray, y: np.ndarray, feet: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Batched grids for N racers: terrain (N,4,16,16), items (N,2,..), targets, goals (N,3,..).
-
-        One fancy index of the window view builds all twelve channels; the four arrays are views.
-        """
-        ij = ((np.stack((x, y))[:, None, :] - self.origin3) * self.inv3).astype(np.intp)
-        ij -= HALF
-        _clip(ij, 0, self.max_ij, out=ij)  # (2, 4 layers, N)
-        lay = self.layer_of
-        ix, iy = ij[0], ij[1]
-        out = self.windows[(self.row_base + ix[lay]).T, iy[lay].T]  # (N, 12, 16, 16)
-        hts = out[:, 0:4:2]
-        hts -= (feet * 0.2).reshape(-1, 1, 1, 1)
-        _clip(hts, -1.0, 1.0, out=hts)
+        """Batched grids for N racers: terrain (N,4,16,16), items (N,2,..), targets, goals (N,3,..)."""
+        out = self.observe_all(np.stack((x, y)), feet * 0.2)
         return out[:, 0:4], out[:, 4:6], out[:, 6:9], out[:, 9:12]
+
+    def observe_all(self, xy: np.ndarray, feet5: np.ndarray) -> np.ndarray:
+        """All twelve grid channels (N, 12, 16, 16) from positions ``xy`` (2, N) and feet / 5 m.
+
+        Channels: terrain 0-3, items 4-5, targets 6-8, goals 9-11. One fancy index of the
+        sliding-window view copies them all.
+        """
+        ij = ((xy[:, None, :] - self.corner3) * self.inv3).astype(np.intp)  # window corners
+        _clip(ij, 0, self.max_ij, out=ij)  # (2, 4 layers, N)
+        ijl = ij[:, self.layer_of]  # (2, 12, N)
+        ijl[0] += self.row_base
+        out = self.windows[ijl[0].T, ijl[1].T]  # (N, 12, 16, 16)
+        hts = out[:, 0:4:2]
+        hts -= feet5.reshape(-1, 1, 1, 1)
+        _clip(hts, -1.0, 1.0, out=hts)
+        return out

@@ -422,7 +422,7 @@ class RaceSim:
         """Batched observations: dict of (N, ...) float32 arrays (see ``game_env.spaces``)."""
         n = self.n
         p = np.array(pos).reshape(n, 3).T
-        terrain, items, targets, goals = self.grids.observe(p[0], p[1], p[2] - FEET)
+        grid = self.grids.observe_all(p[:2], (p[2] - FEET) * 0.2)
         t = self.data.time
         tf = self.steps / self.max_episode_steps
         ng = len(self.goal_pos) - 1
@@ -449,8 +449,8 @@ class RaceSim:
             ] + self.dest_static)
         vec = np.array(rows, np.float32)
         _clip(vec, -1.0, 1.0, out=vec)
-        return {"terrain": terrain, "items": items, "targets": targets, "goals": goals, "agent": vec[:, :32],
-                "destination": vec[:, 32:]}
+        return {"terrain": grid[:, 0:4], "items": grid[:, 4:6], "targets": grid[:, 6:9], "goals": grid[:, 9:12],
+                "agent": vec[:, :32], "destination": vec[:, 32:]}
 
     def _cliff(self, pos: list[float], i: int) -> float:
         _, ix, iy = self._floor(pos, i)
