@@ -128,6 +128,7 @@ class ObstacleRaceEnv(gym.Env):
             from game_env.render import RaceRenderer
 
             self._renderer = RaceRenderer(self.sim.model, self.width, self.height)
+        self.sim.sync_visuals()
         return self._renderer.chase(self.sim.data, self.sim.pos[0])
 
     def close(self) -> None:

@@ -168,6 +168,7 @@ class RaceParallelEnv(ParallelEnv):
             from game_env.render import RaceRenderer
 
             self._renderer = RaceRenderer(self.sim.model, self.width, self.height)
+        self.sim.sync_visuals()
         pos = self.sim.pos
         return self._renderer.chase(self.sim.data, pos[int(np.argmax(pos[:, 0]))])
 

@@ -56,6 +56,7 @@ def record(map_id: int, seed: int, out: Path, steps: int = 1000, width: int = 48
     for k in range(steps):
         _, _, done, err = sim.step(bot.act()[None])
         if k % 2 == 0:
+            sim.sync_visuals()
             frames.append(renderer.chase(sim.data, sim.pos[0]).copy())
         if done[0] or err:
             break

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import Any
 
 import numpy as np
 
@@ -29,12 +30,27 @@ ACCEL = RACER_FORCE / RACER_MASS
 
 
 class ScriptedRacer:
-    """Policy for racer ``racer`` of ``sim``; call ``act()`` once per env step."""
+    """Policy for racer ``racer``; call ``act()`` once per env step.
 
-    def __init__(self, sim: RaceSim, racer: int = 0) -> None:
+    ``source`` is a ``RaceSim``, a ``gymnasium.make``'d race env (wrapped or not) or the
+    PettingZoo env; ``racer`` is an index or an agent name ("racer_2").
+    """
+
+    def __init__(self, source: Any, racer: int | str = 0) -> None:
+        sim = source if isinstance(source, RaceSim) else getattr(source, "sim", None)
+        if sim is None:
+            sim = getattr(getattr(source, "unwrapped", None), "sim", None)
+        if not isinstance(sim, RaceSim):
+            raise ValueError(f"source={source!r} is not valid; allowed: a RaceSim or a game_env env")
         self.sim = sim
-        self.i = racer
+        self.i = int(racer[6:]) if isinstance(racer, str) and racer.startswith("racer_") else int(racer)
+        if not 0 <= self.i < sim.n:
+            raise ValueError(f"racer={racer!r} is out of range; allowed: 0..{sim.n - 1}")
         self.seg = 0
+
+    def __call__(self, observation: Any = None) -> np.ndarray:
+        """Same as ``act``; the observation is not needed (the racer reads the simulator)."""
+        return self.act()
 
     def _surface(self, x: float, feet: float, grounded: bool) -> int:
         surfaces = self.sim.course.surfaces
@@ -61,7 +77,7 @@ class ScriptedRacer:
                 return tau
         return float("inf")
 
-    def act(self) -> np.ndarray:
+    def act(self, observation: Any = None) -> np.ndarray:
         """The action of this env step: MultiDiscrete([3,3,2,2,2,2,8,2]) as an int array."""
         sim, i = self.sim, self.i
         r = sim.racers[i]

@@ -149,6 +149,10 @@ class RaceSim:
         self._agent_rows = [None] * self.n
         return self._observe(pos, self.data.qvel[self.qvel_flat].tolist(), [self._floor(pos, i)[0] for i in range(self.n)])
 
+    def sync_visuals(self) -> None:
+        """Turn the hammer bars (visual only; hits are computed from their phase) to now."""
+        self.hammers.pose(self.data, self.data.time)
+
     @property
     def pos(self) -> np.ndarray:
         """(N, 3) racer centre positions."""
@@ -224,8 +228,6 @@ class RaceSim:
                 self._attack(i, t0)
             ctrl += (tx, ty)
         data.ctrl[:] = ctrl  # actuators are (racer0 x, racer0 y, racer1 x, ...)
-        if self.hammers.n:
-            self.hammers.pose(data, t0 + half)
         mujoco.mj_step(self.model, data, nstep=self.frame_skip)
         self.steps += 1
         if self._bad_count() != self._warn:

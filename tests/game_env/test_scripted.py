@@ -28,3 +28,19 @@ def test_scripted_racers_finish_together_in_one_scene():
         if not any(r.active for r in sim.racers):
             break
     assert sum(r.success for r in sim.racers) >= 3
+
+
+def test_scripted_racer_drives_the_gymnasium_env_to_the_destination():
+    import gymnasium as gym
+
+    env = gym.make("game_env/ObstacleRace-v0", map_id=8, course_seed=0)
+    obs, _ = env.reset(seed=0)
+    bot = ScriptedRacer(env)
+    total = 0.0
+    for _ in range(1000):
+        obs, reward, term, trunc, info = env.step(bot(obs))
+        total += reward
+        if term or trunc:
+            break
+    assert term and info["episode_metrics"]["success"] == 1.0
+    assert abs(info["episode_metrics"]["total_reward"] - total) < 1e-9
