@@ -6,6 +6,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from rllib_asor.cli.errors import UsageError
 
@@ -20,11 +21,18 @@ def _report_module():
         return None
 
 
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line on stderr (like every other bad input)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full `rllib` parser."""
     from rllib_asor.cli import evaluate, train
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="rllib", description="Train and evaluate RLlib (new API stack) agents, with ASOR."
     )
     sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report}")
@@ -61,7 +69,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     0 success, 1 training failed (a trial errored), 2 bad input (one line on stderr).
     """
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help (0) or a usage error (2): return it, do not raise
+        return e.code if isinstance(e.code, int) else 2
     try:
         return int(args.func(args) or 0)
     except UsageError as e:

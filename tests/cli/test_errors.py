@@ -139,3 +139,18 @@ def test_console_script_prints_one_line_and_exits_2(write_yaml):
     )
     assert proc.returncode == 2
     _assert_one_line(proc.stderr, path, "x.config.bogus_key", "allowed:")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [["train", "--num-env-runners", "abc"], ["evaluate"], [], ["nonsense"]],
+)
+def test_usage_errors_return_2_with_one_line(capsys, argv):
+    rc, err = _run(capsys, argv)
+    assert rc == 2
+    _assert_one_line(err, "error:")
+
+
+def test_help_returns_0(capsys):
+    assert main(["train", "--help"]) == 0
+    assert "rllib train file PATH" in capsys.readouterr().out
