@@ -1,8 +1,8 @@
 """Look at a map: ``python -m game_env.preview --map 3 --out map3.png [--video ep.mp4]``.
 
 The picture is an overview of the whole course (course seed ``--seed``); ``--video`` also
-records an episode of the scripted racer from a chase camera (mp4 through imageio if it is
-installed, else a folder of PNG frames).
+records an episode of the scripted racer from a chase camera (the requested format through
+imageio; a GIF if that writer is missing, e.g. mp4 without ffmpeg; else a folder of PNGs).
 """
 
 from __future__ import annotations
@@ -63,15 +63,24 @@ def record(map_id: int, seed: int, out: Path, steps: int = 1000, width: int = 48
     renderer.close()
     try:
         import imageio.v2 as imageio
-
-        imageio.mimsave(out, frames, fps=12)
-        return out
-    except Exception:  # noqa: BLE001 - no imageio/ffmpeg: fall back to PNG frames
-        folder = out.with_suffix("")
-        folder.mkdir(parents=True, exist_ok=True)
-        for k, f in enumerate(frames):
-            _save_png(f, folder / f"frame{k:04d}.png")
-        return folder
+    except ImportError:
+        imageio = None
+    for path in (out, out.with_suffix(".gif")):  # mp4 needs ffmpeg; GIF only Pillow
+        if imageio is None:
+            break
+        try:
+            if path.suffix == ".gif":
+                imageio.mimsave(path, frames, duration=1000 / 12, loop=0)
+            else:
+                imageio.mimsave(path, frames, fps=12)
+            return path
+        except Exception:  # noqa: BLE001 - writer backend missing: try the next format
+            path.unlink(missing_ok=True)
+    folder = out.with_suffix("")  # last resort: a folder of PNG frames
+    folder.mkdir(parents=True, exist_ok=True)
+    for k, f in enumerate(frames):
+        _save_png(f, folder / f"frame{k:04d}.png")
+    return folder
 
 
 def main(argv: list[str] | None = None) -> None:
