@@ -7,13 +7,32 @@ import pytest
 os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
 os.environ.setdefault("RAY_DISABLE_DOCKER_CPU_WARNING", "1")
 os.environ.setdefault("MUJOCO_GL", "egl")
+# Two cores: torch's intra-op threads fight the env runners and each other (a batch-1 forward
+# went from ~5 ms to 200 ms under load with 2 threads).
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _one_torch_thread():
+    import torch
+
+    torch.set_num_threads(1)
 
 
 @pytest.fixture(scope="session")
 def ray_session():
-    """A local Ray with 4 logical CPUs (2 real cores are enough for tiny runs)."""
+    """A fresh local Ray with 4 logical CPUs (2 real cores are enough for tiny runs).
+
+    `address="local"` so that a `ray start` cluster elsewhere on the machine is ignored.
+    """
     import ray
 
     if not ray.is_initialized():
-        ray.init(num_cpus=4, include_dashboard=False, log_to_driver=False, configure_logging=False)
+        ray.init(
+            address="local",
+            num_cpus=4,
+            include_dashboard=False,
+            log_to_driver=False,
+            configure_logging=False,
+        )
     yield ray

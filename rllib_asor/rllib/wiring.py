@@ -78,7 +78,23 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
         learner_config_dict={**(config.learner_config_dict or {}), "asor": asor_dict},
     )
     config.callbacks(callbacks_class=_with_callback(config.callbacks_class))
+    if config.is_multi_agent and config.policies_to_train is not None:
+        config.multi_agent(policies_to_train=_AlsoTrainAux(config.policies_to_train))
     return config
+
+
+class _AlsoTrainAux:
+    """`policies_to_train` that keeps the user's choice and always trains ASOR's modules."""
+
+    def __init__(self, user: Any) -> None:
+        self.user = user.user if isinstance(user, _AlsoTrainAux) else user
+
+    def __call__(self, module_id: str, batch: Any = None) -> bool:
+        if is_aux_module(module_id):
+            return True
+        if callable(self.user):
+            return bool(self.user(module_id, batch))
+        return module_id in set(self.user)
 
 
 def trained_policy_ids(config: AlgorithmConfig) -> list[str]:
@@ -87,6 +103,8 @@ def trained_policy_ids(config: AlgorithmConfig) -> list[str]:
         return [DEFAULT_MODULE_ID]
     pids = list(config.policies)
     to_train = config.policies_to_train
+    if isinstance(to_train, _AlsoTrainAux):
+        to_train = to_train.user
     if to_train is not None and not callable(to_train):
         pids = [p for p in pids if p in set(to_train)]
     return pids
@@ -95,17 +113,13 @@ def trained_policy_ids(config: AlgorithmConfig) -> list[str]:
 def _module_spec(config: AlgorithmConfig, asor: AsorConfig) -> AsorMultiRLModuleSpec:
     existing = config._rl_module_spec
     pids = trained_policy_ids(config)
+    all_pids = list(config.policies) if config.is_multi_agent else [DEFAULT_MODULE_ID]
     if isinstance(existing, MultiRLModuleSpec):
         specs = {m: s for m, s in existing.rl_module_specs.items() if not is_aux_module(m)}
     elif isinstance(existing, RLModuleSpec):
-        specs = {
-            pid: copy.deepcopy(existing)
-            for pid in (pids if config.is_multi_agent else [DEFAULT_MODULE_ID])
-        }
+        specs = {pid: copy.deepcopy(existing) for pid in all_pids}
     else:
-        specs = {
-            pid: RLModuleSpec() for pid in (pids if config.is_multi_agent else [DEFAULT_MODULE_ID])
-        }
+        specs = {pid: RLModuleSpec() for pid in all_pids}
     model_config = {"asor": asor.to_dict()}
     for pid in pids:
         policy_spec = config.policies.get(pid) if config.is_multi_agent else None
