@@ -34,12 +34,13 @@ CHECKPOINT_KEYS = (
 )
 DEFAULT_NUM_TO_KEEP = 3
 # Config keys that are not plain AlgorithmConfig attributes but that we apply ourselves.
-SPECIAL_CONFIG_KEYS = ("model_config", "env_config", "env_to_module_connector")
+SPECIAL_CONFIG_KEYS = ("model_config", "env_config", "env_to_module_connector", "rl_module")
 # Config key (as written) -> key in AlgorithmConfig.to_dict() (the Tune param space).
 PARAM_SPACE_KEYS = {
     "model_config": "_model_config",
     "train_batch_size_per_learner": "_train_batch_size_per_learner",
     "env_to_module_connector": "_env_to_module_connector",
+    "rl_module": "_rl_module_spec",
     "lambda_": "lambda",
     "input_": "input",
     "framework_str": "framework",
@@ -335,6 +336,9 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
         model_config = values.pop("model_config", None)
         env_config = values.pop("env_config", None) or {}
         connector = values.pop("env_to_module_connector", None)
+        rl_module = values.pop("rl_module", None)
+        if rl_module is not None:
+            cfg.rl_module(rl_module_spec=_module_spec(rl_module, exp))
         cfg.environment(env=exp.env, env_config=env_config)
         if model_config is not None:
             cfg.rl_module(model_config=model_config)
@@ -346,6 +350,19 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
             raise UsageError(f"invalid value: {_one_line(e)}", source=exp.source,
                              key=f"{exp.name}.config") from None
     return cfg
+
+
+def _module_spec(block: dict[str, Any], exp: Experiment) -> Any:
+    """RLModuleSpec for `rl_module: {module_class: ...}`; model_config comes from the config."""
+    from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+
+    from rllib_asor.models import get_module_class
+
+    try:
+        return RLModuleSpec(module_class=get_module_class(block["module_class"]))
+    except ValueError as e:
+        raise UsageError(_one_line(e), source=exp.source,
+                         key=f"{exp.name}.config.rl_module.module_class") from None
 
 
 def _one_line(e: BaseException) -> str:

@@ -54,6 +54,8 @@ RENAMED_SPEC_KEYS: dict[str, tuple[str, str]] = {
 }
 
 OBSERVATION_FILTERS = ("NoFilter", "MeanStdFilter")
+# `config.rl_module: {module_class: NAME, model_config: {...}}` (NAME: rllib_asor.models registry).
+RL_MODULE_KEYS = ("module_class", "model_config")
 
 
 def mean_std_filter_connector(env: Any = None, spaces: Any = None, device: Any = None) -> Any:
@@ -86,6 +88,17 @@ def translate_config(
                 raise UsageError(
                     f"must be a mapping of model settings, got {value!r}", source=source, key="model"
                 )
+            value = dict(value)
+            custom = value.pop("custom_model", None)
+            custom_config = value.pop("custom_model_config", None) or {}
+            if custom:
+                out["rl_module"] = {"module_class": custom}
+                for sub, sub_value in dict(custom_config).items():
+                    model_config.setdefault(sub, sub_value)
+                warnings.append(
+                    f"{source}: legacy key 'model.custom_model: {custom}' translated to "
+                    "'rl_module: {module_class: ...}' (custom_model_config -> model_config)"
+                )
             if value:
                 for sub, sub_value in value.items():
                     _check_model_key(sub, source, f"{prefix}model.{sub}")
@@ -94,6 +107,18 @@ def translate_config(
                     f"{source}: legacy key 'model' ({', '.join(sorted(value))}) translated to "
                     "'model_config' (config.rl_module(model_config=...))"
                 )
+        elif key == "rl_module":
+            block = dict(value) if isinstance(value, dict) else None
+            if block is None or "module_class" not in block or set(block) - set(RL_MODULE_KEYS):
+                raise UsageError(
+                    f"{value!r} is invalid: allowed a mapping with 'module_class' (a name such "
+                    "as race_net or 'package.module:Class') and optional 'model_config'",
+                    source=source,
+                    key=f"{prefix}rl_module",
+                )
+            for sub, sub_value in dict(block.pop("model_config", None) or {}).items():
+                model_config.setdefault(sub, sub_value)
+            out["rl_module"] = block
         elif key in MODEL_CONFIG_TOPLEVEL_KEYS:
             model_config.setdefault(key, value)
             warnings.append(f"{source}: legacy key '{key}' translated to 'model_config.{key}'")

@@ -79,8 +79,8 @@ def test_framework_tf_is_refused_with_torch_only_message(write_yaml):
 
 
 def test_legacy_model_key_outside_default_model_config_is_refused(write_yaml):
-    path = write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  config: {model: {custom_model: foo}}\n")
-    with pytest.raises(UsageError, match=r"x\.config\.model\.custom_model: unknown model setting; allowed: .*fcnet_hiddens"):
+    path = write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  config: {model: {use_attention: true}}\n")
+    with pytest.raises(UsageError, match=r"x\.config\.model\.use_attention: unknown model setting; allowed: .*fcnet_hiddens"):
         E.load_file(path)
 
 
@@ -91,3 +91,37 @@ def test_flags_build_the_same_experiment_as_yaml(write_yaml):
     )
     assert flags.config == yaml_exp.config == {"num_env_runners": 1, "lr": 0.001}
     assert flags.name == "PPO_CartPole-v1"
+
+
+def test_rl_module_block_selects_a_registered_module_class(write_yaml):
+    [exp] = E.load_file(write_yaml("""
+        x:
+          env: CartPole-v1
+          run: PPO
+          config:
+            rl_module: {module_class: race_net, model_config: {pi_hiddens: [64]}}
+            model_config: {vf_hiddens: [32]}
+    """))
+    cfg = E.validate(exp)
+    assert cfg._rl_module_spec.module_class.__name__ == "RaceNetModule"
+    assert cfg.model_config["pi_hiddens"] == [64] and cfg.model_config["vf_hiddens"] == [32]
+    assert E.param_space(exp, cfg)["_rl_module_spec"].module_class.__name__ == "RaceNetModule"
+
+
+def test_legacy_custom_model_becomes_rl_module_block(write_yaml):
+    [exp] = E.load_file(write_yaml("""
+        x:
+          env: CartPole-v1
+          run: PPO
+          config: {model: {custom_model: race_net, custom_model_config: {pi_hiddens: [64]}}}
+    """))
+    assert exp.config == {"rl_module": {"module_class": "race_net"},
+                          "model_config": {"pi_hiddens": [64]}}
+    assert any("'model.custom_model: race_net' translated to 'rl_module" in w for w in exp.warnings)
+
+
+def test_unknown_module_class_is_refused(write_yaml):
+    [exp] = E.load_file(write_yaml(
+        "x:\n  env: CartPole-v1\n  run: PPO\n  config: {rl_module: {module_class: nope_net}}\n"))
+    with pytest.raises(UsageError, match=r"x\.config\.rl_module\.module_class: .*allowed one of \['race_net'\]"):
+        E.validate(exp)
