@@ -27,7 +27,7 @@ class RaceRenderer:
         """Frame of the course between ``x0`` and ``x1`` from the side and above."""
         cam = self.camera
         cam.lookat[:] = [(x0 + x1) / 2, 0.0, z]
-        cam.distance, cam.azimuth, cam.elevation = 0.72 * (x1 - x0) + 8.0, 65.0, -35.0
+        cam.distance, cam.azimuth, cam.elevation = 0.7 * (x1 - x0) + 8.0, 70.0, -24.0
         return self._draw(data)
 
     def _draw(self, data: mujoco.MjData) -> np.ndarray:

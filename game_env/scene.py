@@ -91,6 +91,10 @@ def build_spec(course: Course, num_racers: int) -> mujoco.MjSpec:
                    _quat_y(b.pitch) if b.pitch else None)
         if b.kind == "conveyor":
             g.surfacevel = [b.belt[0], b.belt[1], 0, 0, 0, 0]
+        depth = (b.cz - b.hz) - (course.floor_min - 3.0)
+        if b.kind != "ramp" and depth > 0.1:  # a visual pillar shows how high the platform is
+            static(f"pillar{k}", [0.85 * b.hx, 0.85 * b.hy, depth / 2], [b.cx, b.cy, b.cz - b.hz - depth / 2],
+                   (0.75, 0.78, 0.85, 1), collide=False)
     for k, t in enumerate(course.trampolines):
         static(f"tramp{k}", [t.hx, t.hy, 0.03], [t.cx, t.cy, t.top - 0.02], (0.1, 0.85, 0.5, 1),
                _quat_y(t.tilt), collide=False)
