@@ -166,7 +166,7 @@ def killed_and_resumed(tmp_path_factory):
                                 start_new_session=True)
     exp = storage / "lava-kill"
     try:
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + 180
         while time.monotonic() < deadline and proc.poll() is None:
             trials = [p for p in exp.glob("AsorPPO_*") if p.is_dir()] if exp.is_dir() else []
             ckpts = _checkpoints(trials[0]) if trials else []
@@ -195,7 +195,7 @@ def killed_and_resumed(tmp_path_factory):
         resumed = subprocess.Popen([*argv, "--resume"], stdout=log, stderr=subprocess.STDOUT,
                                    env=env, start_new_session=True)
         try:
-            rc = resumed.wait(timeout=180)
+            rc = resumed.wait(timeout=300)
         finally:
             _kill_session(resumed)
     return SimpleNamespace(rc=rc, log=(root / "run2.log").read_text(), trial=trial,
@@ -212,6 +212,8 @@ def test_killed_driver_resumes_from_checkpoint_with_continuous_steps(killed_and_
     new = r.after[len(r.before):]
     assert new and new[0]["iterations_since_restore"] == 1
     k = new[0]["training_iteration"] - 1  # the iteration of the checkpoint it resumed from
+    print(f"killed after iteration {last_before}, resumed from iteration {k}, "
+          f"resume run took {r.resume_s:.0f} s")
     assert 3 <= k <= last_before, (k, last_before)
     # Lifetime env steps go on from the checkpointed value (not from 0) ...
     at_k = next(row for row in r.before if row["training_iteration"] == k)
