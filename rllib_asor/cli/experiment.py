@@ -54,6 +54,7 @@ TEST_ENV_RUNNERS = 2
 TEST_CPUS_PER_ENV_RUNNER = 0.5
 TEST_BATCH = 256
 TEST_MINIBATCH = 64
+TEST_DATASET_ITERS = 2
 
 
 @dataclass
@@ -223,9 +224,13 @@ def apply_overrides(
     """Apply command-line options on top of the file's values (in place)."""
     cfg = exp.config
     if test:
-        cfg["num_env_runners"] = TEST_ENV_RUNNERS
-        cfg["num_cpus_per_env_runner"] = TEST_CPUS_PER_ENV_RUNNER
-        cfg["num_envs_per_env_runner"] = 1
+        offline = cfg.get("input", "sampler") != "sampler"
+        if offline:  # data from files: few dataset passes, the file's env runners (often 0)
+            cfg["dataset_num_iters_per_learner"] = TEST_DATASET_ITERS
+        else:
+            cfg["num_env_runners"] = TEST_ENV_RUNNERS
+            cfg["num_cpus_per_env_runner"] = TEST_CPUS_PER_ENV_RUNNER
+            cfg["num_envs_per_env_runner"] = 1
         cfg["num_learners"] = 0
         cfg["evaluation_interval"] = None
         cfg.pop("train_batch_size_per_learner", None)
