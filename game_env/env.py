@@ -75,6 +75,11 @@ class ObstacleRaceEnv(gym.Env):
         return self.sim.data
 
     @property
+    def dt(self) -> float:
+        """Seconds of race time per env step (timestep x frame_skip)."""
+        return self.sim.model.opt.timestep * self.frame_skip
+
+    @property
     def map_id(self) -> int:
         """The map of the current episode."""
         return self.sim.map_id

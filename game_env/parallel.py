@@ -61,6 +61,9 @@ class RaceParallelEnv(ParallelEnv):
         self.agents: list[str] = []
         self.sim = RaceSim(self.num_racers, self.frame_skip, self.max_episode_steps)
         self._rng, _ = seeding.np_random(None)
+        first = 0 if self._map_choice is None else self._map_choice
+        self.sim.load(first, 0 if self._course_seed is None else self._course_seed)  # model/data exist
+        self.sim.reset()
         self._renderer = None
         self._idle_all = np.tile(np.array([1, 1, 0, 0, 0, 0, 0, 1]), (self.num_racers, 1))
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
@@ -85,6 +88,11 @@ class RaceParallelEnv(ParallelEnv):
     def data(self) -> mujoco.MjData:
         """The MuJoCo data of the current episode."""
         return self.sim.data
+
+    @property
+    def dt(self) -> float:
+        """Seconds of race time per env step (timestep x frame_skip)."""
+        return self.sim.model.opt.timestep * self.frame_skip
 
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None

@@ -28,6 +28,7 @@ def test_made_env_exposes_model_data_frame_skip_and_map_id_in_info():
     _, info = env.reset(seed=0)
     assert info["map_id"] == 2
     assert env.unwrapped.frame_skip == 20 and env.unwrapped.model.nq >= 3
+    assert abs(env.unwrapped.dt - 0.04) < 1e-12
     assert env.unwrapped.data.time == 0.0
     _, _, _, _, info = env.step(env.action_space.sample())
     assert info["map_id"] == 2 and set(info["reward_terms"]) == set(REWARD_TERMS)
