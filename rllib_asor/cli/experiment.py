@@ -386,6 +386,17 @@ def _check_grids(exp: Experiment) -> None:
                 )
 
 
+def _check_checkpoint_config(exp: Experiment) -> None:
+    from ray import tune
+
+    try:
+        with _quiet():
+            tune.CheckpointConfig(**checkpoint_kwargs(exp))
+    except (ValueError, TypeError) as e:
+        raise UsageError(_one_line(e), source=exp.source,
+                         key=f"{exp.name}.checkpoint_config") from None
+
+
 def validate_asor(exp: Experiment) -> None:
     """Validate the asor block with AsorConfig for every grid candidate."""
     if exp.asor is None:
@@ -443,6 +454,7 @@ def validate_env(exp: Experiment) -> None:
 def validate(exp: Experiment) -> Any:
     """Check everything that can be checked before Ray starts; return the first-point config."""
     _check_grids(exp)
+    _check_checkpoint_config(exp)
     algorithm_class(exp)
     validate_asor(exp)
     validate_env(exp)

@@ -154,3 +154,10 @@ def test_usage_errors_return_2_with_one_line(capsys, argv):
 def test_help_returns_0(capsys):
     assert main(["train", "--help"]) == 0
     assert "rllib train file PATH" in capsys.readouterr().out
+
+
+def test_bad_checkpoint_config_value_exits_2(write_yaml, capsys):
+    path = write_yaml(GOOD_HEAD + "  checkpoint_config: {num_to_keep: 0}\n")
+    rc, err = _run(capsys, ["train", "file", path])
+    assert rc == 2
+    _assert_one_line(err, path, "x.checkpoint_config", "num_to_keep")
