@@ -101,9 +101,6 @@ class CourseGrids:
         self.corner3 = self.origin3 + HALF * self.res[None, :, None]  # origin of the window corner
         self.inv3 = self.inv_res[None, :, None]
         self.max_ij = np.stack((self.max_ix, self.max_iy))  # (2, 4, 1)
-        self.ox = self.origin[0][:, None]
-        self.oy = self.origin[1][:, None]
-        self.inv = self.inv_res[:, None]
         self._fill_terrain()
         self.archive_state = np.zeros((num_racers, self.n_archives + 1), np.float32)
         self.goal_state = np.zeros((num_racers, len(goals_list := list(course.goals)) + 2), np.float32)
