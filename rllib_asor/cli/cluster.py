@@ -68,8 +68,9 @@ def start_ray(address: str | None, cpus_needed: float) -> None:
             ray.init(address=address, include_dashboard=False, log_to_driver=True)
         except (ConnectionError, RuntimeError, ValueError) as e:
             msg = " ".join(str(e).split())[:200]
-            raise UsageError(f"cannot join the Ray cluster at {address}: {msg}",
-                             key="--address") from None
+            raise UsageError(
+                f"cannot join the Ray cluster at {address}: {msg}", key="--address"
+            ) from None
         return
     num_cpus = max(os.cpu_count() or 1, math.ceil(cpus_needed))
     ray.init(address="local", num_cpus=num_cpus, include_dashboard=False)

@@ -26,8 +26,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `rllib evaluate`."""
     parser.add_argument("checkpoint", help="checkpoint dir (or a trial/experiment dir: latest one)")
     parser.add_argument("--episodes", type=int, default=10, help="episodes to run (default 10)")
-    parser.add_argument("--explore", action="store_true",
-                        help="sample actions from the policy (default: deterministic)")
+    parser.add_argument(
+        "--explore",
+        action="store_true",
+        help="sample actions from the policy (default: deterministic)",
+    )
     parser.add_argument("--seed", type=int, help="seed of the evaluation env")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
@@ -45,8 +48,11 @@ def find_checkpoint(path: str) -> str:
             found.append(root)
             dirs.clear()
     if not found:
-        raise UsageError("no RLlib checkpoint in this directory; allowed: a checkpoint_NNNNNN "
-                         "directory written by 'rllib train'", source=path)
+        raise UsageError(
+            "no RLlib checkpoint in this directory; allowed: a checkpoint_NNNNNN "
+            "directory written by 'rllib train'",
+            source=path,
+        )
     return max(found, key=lambda p: (os.path.getmtime(p), p))
 
 
@@ -57,11 +63,19 @@ def _local_config(path: str, seed: int | None) -> dict[str, Any]:
             ctor = pickle.load(f)
         config = ctor["ctor_args_and_kwargs"][0][0]
     except Exception as e:
-        raise UsageError(f"cannot read the algorithm config ({type(e).__name__}: {e})",
-                         source=os.path.join(path, CTOR_FILE)) from None
+        raise UsageError(
+            f"cannot read the algorithm config ({type(e).__name__}: {e})",
+            source=os.path.join(path, CTOR_FILE),
+        ) from None
     config = config.to_dict() if hasattr(config, "to_dict") else dict(config)
-    config.update(num_env_runners=0, num_envs_per_env_runner=1, evaluation_num_env_runners=0,
-                  evaluation_interval=None, num_learners=0, create_env_on_driver=True)
+    config.update(
+        num_env_runners=0,
+        num_envs_per_env_runner=1,
+        evaluation_num_env_runners=0,
+        evaluation_interval=None,
+        num_learners=0,
+        create_env_on_driver=True,
+    )
     if seed is not None:
         config["seed"] = seed
     return config
@@ -82,8 +96,9 @@ def _unreadable_file(path: str) -> tuple[str, str] | None:
     return None
 
 
-def evaluate(path: str, episodes: int, explore: bool = False, seed: int | None = None
-             ) -> dict[str, Any]:
+def evaluate(
+    path: str, episodes: int, explore: bool = False, seed: int | None = None
+) -> dict[str, Any]:
     """Restore the algorithm at `path` and run `episodes` episodes; return the statistics."""
     from ray.rllib.algorithms.algorithm import Algorithm
 
@@ -133,8 +148,10 @@ def run(args: argparse.Namespace) -> int:
     policy = "stochastic (--explore)" if stats["explore"] else "deterministic"
     print(f"checkpoint: {stats['checkpoint']}")
     print(f"env: {stats['env']}  episodes: {stats['episodes']}  policy: {policy}")
-    print(f"return: mean {stats['return_mean']:.3f}  std {stats['return_std']:.3f}  "
-          f"min {stats['return_min']:.3f}  max {stats['return_max']:.3f}")
+    print(
+        f"return: mean {stats['return_mean']:.3f}  std {stats['return_std']:.3f}  "
+        f"min {stats['return_min']:.3f}  max {stats['return_max']:.3f}"
+    )
     print("episode returns: " + " ".join(f"{r:g}" for r in stats["returns"]))
     print("episode lengths: " + " ".join(str(n) for n in stats["lengths"]))
     sys.stdout.flush()

@@ -116,14 +116,18 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
             value = spec.pop(old)
             if section == "checkpoint_config":
                 ckpt.setdefault(new, value)
-                warns.append(f"{source}: legacy key '{old}' translated to 'checkpoint_config.{new}'")
+                warns.append(
+                    f"{source}: legacy key '{old}' translated to 'checkpoint_config.{new}'"
+                )
             else:
                 spec.setdefault(new, value)
                 warns.append(f"{source}: legacy key '{old}' translated to '{new}'")
     unknown = sorted(set(spec) - set(SPEC_KEYS))
     if unknown:
         raise UsageError(
-            f"unknown key; allowed: {', '.join(SPEC_KEYS)}", source=source, key=f"{name}.{unknown[0]}"
+            f"unknown key; allowed: {', '.join(SPEC_KEYS)}",
+            source=source,
+            key=f"{name}.{unknown[0]}",
         )
     bad_ckpt = sorted(set(ckpt) - set(CHECKPOINT_KEYS))
     if bad_ckpt:
@@ -145,15 +149,24 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     env = spec.get("env", config.pop("env", None))
     run = spec.get("run")
     if not isinstance(run, str) or not run:
-        raise UsageError("missing or not a string; allowed: an RLlib algorithm name such as PPO",
-                         source=source, key=f"{name}.run")
+        raise UsageError(
+            "missing or not a string; allowed: an RLlib algorithm name such as PPO",
+            source=source,
+            key=f"{name}.run",
+        )
     if not isinstance(env, str) or not env:
-        raise UsageError("missing or not a string; allowed: a registered env id such as "
-                         "CartPole-v1", source=source, key=f"{name}.env")
+        raise UsageError(
+            "missing or not a string; allowed: a registered env id such as CartPole-v1",
+            source=source,
+            key=f"{name}.env",
+        )
     num_samples = spec.get("num_samples", 1)
     if isinstance(num_samples, bool) or not isinstance(num_samples, int) or num_samples < 1:
-        raise UsageError(f"{num_samples!r} is invalid: allowed an integer >= 1",
-                         source=source, key=f"{name}.num_samples")
+        raise UsageError(
+            f"{num_samples!r} is invalid: allowed an integer >= 1",
+            source=source,
+            key=f"{name}.num_samples",
+        )
     return Experiment(
         name=name,
         run=run,
@@ -176,7 +189,9 @@ def from_flags(run: str, env: str, config_json: str | None, name: str | None = N
         try:
             config = json.loads(config_json)
         except json.JSONDecodeError as e:
-            raise UsageError(f"invalid JSON: {e.msg} at column {e.colno}", source="--config") from None
+            raise UsageError(
+                f"invalid JSON: {e.msg} at column {e.colno}", source="--config"
+            ) from None
     name = name or re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{run}_{env}")
     return parse_experiment(name, {"run": run, "env": env, "config": config}, "--config")
 
@@ -195,8 +210,9 @@ def parse_stop_flags(items: list[str] | None) -> dict[str, Any]:
         key, sep, raw = item.partition("=")
         key = key.strip()
         if not sep or not key:
-            raise UsageError(f"{item!r} is invalid: allowed KEY=VALUE, e.g. training_iteration=10",
-                             key="--stop")
+            raise UsageError(
+                f"{item!r} is invalid: allowed KEY=VALUE, e.g. training_iteration=10", key="--stop"
+            )
         stop[key] = _number(raw.strip())
     translated, _ = legacy.translate_stop(stop, "", "--stop ")
     return translated
@@ -243,20 +259,23 @@ def apply_overrides(
         exp.stop = dict(TEST_STOP)
     if num_env_runners is not None:
         if num_env_runners < 0:
-            raise UsageError(f"{num_env_runners} is invalid: allowed an integer >= 0",
-                             key="--num-env-runners")
+            raise UsageError(
+                f"{num_env_runners} is invalid: allowed an integer >= 0", key="--num-env-runners"
+            )
         cfg["num_env_runners"] = num_env_runners
     if stop:
         exp.stop = {**exp.stop, **stop} if not test else dict(stop)
     if checkpoint_freq is not None:
         if checkpoint_freq < 0:
-            raise UsageError(f"{checkpoint_freq} is invalid: allowed an integer >= 0",
-                             key="--checkpoint-freq")
+            raise UsageError(
+                f"{checkpoint_freq} is invalid: allowed an integer >= 0", key="--checkpoint-freq"
+            )
         exp.checkpoint_config["checkpoint_frequency"] = checkpoint_freq
     if keep_checkpoints is not None:
         if keep_checkpoints < 1:
-            raise UsageError(f"{keep_checkpoints} is invalid: allowed an integer >= 1",
-                             key="--keep-checkpoints")
+            raise UsageError(
+                f"{keep_checkpoints} is invalid: allowed an integer >= 1", key="--keep-checkpoints"
+            )
         exp.checkpoint_config["num_to_keep"] = keep_checkpoints
 
 
@@ -291,8 +310,11 @@ def algorithm_class(exp: Experiment) -> type:
             return get_trainable_cls(exp.run)
     except Exception:
         allowed = ", ".join(sorted(ALGORITHMS))
-        raise UsageError(f"unknown algorithm {exp.run!r}; allowed: {allowed}",
-                         source=exp.source, key=f"{exp.name}.run") from None
+        raise UsageError(
+            f"unknown algorithm {exp.run!r}; allowed: {allowed}",
+            source=exp.source,
+            key=f"{exp.name}.run",
+        ) from None
 
 
 def _attr_name(key: str) -> str:
@@ -326,8 +348,11 @@ def _check_key(default_cfg: Any, key: str, exp: Experiment) -> None:
             key=where,
         )
     if getattr(default_cfg, attr, None) == DEPRECATED_VALUE:
-        raise UsageError(f"is deprecated and has no effect on RLlib's new API stack ({algo})",
-                         source=exp.source, key=where)
+        raise UsageError(
+            f"is deprecated and has no effect on RLlib's new API stack ({algo})",
+            source=exp.source,
+            key=where,
+        )
 
 
 def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = None) -> Any:
@@ -352,8 +377,9 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
         try:
             cfg.update_from_dict(values)
         except Exception as e:  # a value RLlib's setters reject
-            raise UsageError(f"invalid value: {_one_line(e)}", source=exp.source,
-                             key=f"{exp.name}.config") from None
+            raise UsageError(
+                f"invalid value: {_one_line(e)}", source=exp.source, key=f"{exp.name}.config"
+            ) from None
     return cfg
 
 
@@ -366,8 +392,9 @@ def _module_spec(block: dict[str, Any], exp: Experiment) -> Any:
     try:
         return RLModuleSpec(module_class=get_module_class(block["module_class"]))
     except ValueError as e:
-        raise UsageError(_one_line(e), source=exp.source,
-                         key=f"{exp.name}.config.rl_module.module_class") from None
+        raise UsageError(
+            _one_line(e), source=exp.source, key=f"{exp.name}.config.rl_module.module_class"
+        ) from None
 
 
 def _one_line(e: BaseException) -> str:
@@ -393,8 +420,9 @@ def _check_checkpoint_config(exp: Experiment) -> None:
         with _quiet():
             tune.CheckpointConfig(**checkpoint_kwargs(exp))
     except (ValueError, TypeError) as e:
-        raise UsageError(_one_line(e), source=exp.source,
-                         key=f"{exp.name}.checkpoint_config") from None
+        raise UsageError(
+            _one_line(e), source=exp.source, key=f"{exp.name}.checkpoint_config"
+        ) from None
 
 
 def validate_asor(exp: Experiment) -> None:
@@ -423,7 +451,9 @@ def validate_asor(exp: Experiment) -> None:
         try:
             AsorConfig.from_dict(grid.with_candidates(exp.asor, choice))
         except (ValueError, TypeError) as e:
-            raise UsageError(_one_line(e), source=exp.source, key=f"{exp.name}.config.asor") from None
+            raise UsageError(
+                _one_line(e), source=exp.source, key=f"{exp.name}.config.asor"
+            ) from None
 
 
 def validate_env(exp: Experiment) -> None:
@@ -434,8 +464,11 @@ def validate_env(exp: Experiment) -> None:
 
     with _quiet():
         if not envs.env_exists(exp.env):
-            raise UsageError(f"unknown env id {exp.env!r}; allowed: {envs.known_ids()}",
-                             source=exp.source, key=f"{exp.name}.env")
+            raise UsageError(
+                f"unknown env id {exp.env!r}; allowed: {envs.known_ids()}",
+                source=exp.source,
+                key=f"{exp.name}.env",
+            )
         if exp.env not in gym.registry:
             return  # registered with Tune by someone else: built only on the env runners
         tree = exp.config.get("env_config") or {}
@@ -447,8 +480,11 @@ def validate_env(exp: Experiment) -> None:
             try:
                 envs.make_env(exp.env, env_config).close()
             except Exception as e:
-                raise UsageError(f"{exp.env} cannot be built with {env_config!r}: {_one_line(e)}",
-                                 source=exp.source, key=f"{exp.name}.config.env_config") from None
+                raise UsageError(
+                    f"{exp.env} cannot be built with {env_config!r}: {_one_line(e)}",
+                    source=exp.source,
+                    key=f"{exp.name}.config.env_config",
+                ) from None
 
 
 def validate(exp: Experiment) -> Any:
@@ -468,7 +504,9 @@ def validate(exp: Experiment) -> Any:
             try:
                 candidate.validate()
             except Exception as e:
-                raise UsageError(_one_line(e), source=exp.source, key=f"{exp.name}.config") from None
+                raise UsageError(
+                    _one_line(e), source=exp.source, key=f"{exp.name}.config"
+                ) from None
         cfg = cfg or candidate
     return cfg
 

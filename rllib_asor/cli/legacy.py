@@ -86,7 +86,9 @@ def translate_config(
         elif key == "model":
             if not isinstance(value, dict):
                 raise UsageError(
-                    f"must be a mapping of model settings, got {value!r}", source=source, key="model"
+                    f"must be a mapping of model settings, got {value!r}",
+                    source=source,
+                    key="model",
                 )
             value = dict(value)
             custom = value.pop("custom_model", None)
@@ -174,7 +176,9 @@ def translate_stop(
     for key, value in stop.items():
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise UsageError(
-                f"stop value {value!r} is invalid: allowed a number", source=source, key=f"{prefix}{key}"
+                f"stop value {value!r} is invalid: allowed a number",
+                source=source,
+                key=f"{prefix}{key}",
             )
         if key in RENAMED_STOP_KEYS:
             new = RENAMED_STOP_KEYS[key]

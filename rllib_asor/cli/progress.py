@@ -26,23 +26,30 @@ class ProgressReporter(CLIReporter):
     def __init__(self, **kwargs: Any) -> None:
         # print_intermediate_tables defaults to "Tune's global verbosity >= 3 at construction",
         # which a previous run in the same process lowers: ask for the table explicitly.
-        super().__init__(metric_columns=dict(BASE_COLUMNS), max_report_frequency=10,
-                         print_intermediate_tables=True, **kwargs)
+        super().__init__(
+            metric_columns=dict(BASE_COLUMNS),
+            max_report_frequency=10,
+            print_intermediate_tables=True,
+            **kwargs,
+        )
         self._asor_seen: set[str] = set()
 
     def report(self, trials: list[Any], done: bool, *sys_info: str) -> None:
         found: set[str] = set()
         for trial in trials:
             result = {k: v for k, v in (trial.last_result or {}).items() if k != "config"}
-            found.update(k for k in flatten_dict(result, delimiter="/")
-                         if k.startswith("asor/") or "/asor/" in k)
+            found.update(
+                k
+                for k in flatten_dict(result, delimiter="/")
+                if k.startswith("asor/") or "/asor/" in k
+            )
             race = result.get("race") or {}
             found.update(f"race/{k}" for k in RACE_COLUMNS if k in race)
         for key in sorted(found - self._asor_seen, key=_rank):
             if len(self._asor_seen) >= MAX_ASOR_COLUMNS:
                 break
             self._asor_seen.add(key)
-            self.add_metric_column(key, key[key.index("asor/"):] if "asor/" in key else key)
+            self.add_metric_column(key, key[key.index("asor/") :] if "asor/" in key else key)
         super().report(trials, done, *sys_info)
 
 

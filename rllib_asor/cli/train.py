@@ -15,25 +15,40 @@ DEFAULT_STORAGE = "~/ray_results"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `rllib train [file PATH]`."""
-    parser.add_argument("source", nargs="*", metavar="file PATH",
-                        help="'file PATH' of a YAML experiment file (old RLlib format)")
+    parser.add_argument(
+        "source",
+        nargs="*",
+        metavar="file PATH",
+        help="'file PATH' of a YAML experiment file (old RLlib format)",
+    )
     parser.add_argument("-f", "--config-file", help="same as 'file PATH'")
     parser.add_argument("--run", help="algorithm (PPO, SAC, ...) when no file is given")
     parser.add_argument("--env", help="env id when no file is given")
     parser.add_argument("--config", help="JSON algorithm config when no file is given")
     parser.add_argument("--name", help="experiment name when no file is given")
-    parser.add_argument("--test", action="store_true",
-                        help="tiny run: 2 env runners at 0.5 CPU, batch 256, 2 iterations")
+    parser.add_argument(
+        "--test",
+        action="store_true",
+        help="tiny run: 2 env runners at 0.5 CPU, batch 256, 2 iterations",
+    )
     parser.add_argument("--num-env-runners", type=int, help="override num_env_runners")
-    parser.add_argument("--stop", action="append", metavar="KEY=VALUE",
-                        help="stop criterion (repeatable); legacy names are translated")
+    parser.add_argument(
+        "--stop",
+        action="append",
+        metavar="KEY=VALUE",
+        help="stop criterion (repeatable); legacy names are translated",
+    )
     parser.add_argument("--storage-path", help=f"results root (default {DEFAULT_STORAGE})")
-    parser.add_argument("--resume", action="store_true",
-                        help="resume the experiment found under the storage path")
+    parser.add_argument(
+        "--resume", action="store_true", help="resume the experiment found under the storage path"
+    )
     parser.add_argument("--address", help="join a running Ray cluster (HOST:PORT or auto)")
     parser.add_argument("--checkpoint-freq", type=int, help="checkpoint every N iterations")
-    parser.add_argument("--keep-checkpoints", type=int,
-                        help=f"checkpoints to keep per trial (default {E.DEFAULT_NUM_TO_KEEP})")
+    parser.add_argument(
+        "--keep-checkpoints",
+        type=int,
+        help=f"checkpoints to keep per trial (default {E.DEFAULT_NUM_TO_KEEP})",
+    )
 
 
 def load_experiments(args: argparse.Namespace) -> list[E.Experiment]:
@@ -41,20 +56,24 @@ def load_experiments(args: argparse.Namespace) -> list[E.Experiment]:
     path = args.config_file
     if args.source:
         if args.source[0] != "file" or len(args.source) != 2:
-            raise UsageError(f"{' '.join(args.source)!r} is invalid: allowed 'file PATH'",
-                             key="rllib train")
+            raise UsageError(
+                f"{' '.join(args.source)!r} is invalid: allowed 'file PATH'", key="rllib train"
+            )
         path = args.source[1]
     if path:
         if args.run or args.env or args.config:
-            raise UsageError("give either 'file PATH' or --run/--env/--config, not both",
-                             key="rllib train")
+            raise UsageError(
+                "give either 'file PATH' or --run/--env/--config, not both", key="rllib train"
+            )
         exps = E.load_file(path)
         if args.name and len(exps) == 1:
             exps[0].name = args.name
         return exps
     if not args.run or not args.env:
-        raise UsageError("missing input: allowed 'file PATH' or --run ALGO --env ID [--config JSON]",
-                         key="rllib train")
+        raise UsageError(
+            "missing input: allowed 'file PATH' or --run ALGO --env ID [--config JSON]",
+            key="rllib train",
+        )
     return [E.from_flags(args.run, args.env, args.config, args.name)]
 
 
@@ -79,9 +98,14 @@ def run(args: argparse.Namespace) -> int:
     exps = load_experiments(args)
     configs = []
     for exp in exps:
-        E.apply_overrides(exp, test=args.test, num_env_runners=args.num_env_runners, stop=stop,
-                          checkpoint_freq=args.checkpoint_freq,
-                          keep_checkpoints=args.keep_checkpoints)
+        E.apply_overrides(
+            exp,
+            test=args.test,
+            num_env_runners=args.num_env_runners,
+            stop=stop,
+            checkpoint_freq=args.checkpoint_freq,
+            keep_checkpoints=args.keep_checkpoints,
+        )
         configs.append(E.validate(exp))
         if args.resume:
             _check_resumable(os.path.join(storage_path(args, exp), exp.name))
@@ -105,8 +129,9 @@ def _check_resumable(path: str) -> None:
     from ray import tune
 
     if "://" not in path and not os.path.isdir(path) or not tune.Tuner.can_restore(path):
-        raise UsageError(f"no previous run to resume at {path} (train once without --resume)",
-                         key="--resume")
+        raise UsageError(
+            f"no previous run to resume at {path} (train once without --resume)", key="--resume"
+        )
 
 
 def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> int:
@@ -120,11 +145,19 @@ def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> i
     trainable = _trainable(exp)
     space = E.param_space(exp, algo_config)
     root = storage_path(args, exp)
-    print(f"rllib: {exp.name}: {exp.run} on {exp.env}, {exp.num_trials} trial(s), "
-          f"stop {exp.stop}, results in {os.path.join(root, exp.name)}", flush=True)
+    print(
+        f"rllib: {exp.name}: {exp.run} on {exp.env}, {exp.num_trials} trial(s), "
+        f"stop {exp.stop}, results in {os.path.join(root, exp.name)}",
+        flush=True,
+    )
     if args.resume:
-        tuner = tune.Tuner.restore(os.path.join(root, exp.name), trainable=trainable,
-                                   param_space=space, resume_unfinished=True, resume_errored=True)
+        tuner = tune.Tuner.restore(
+            os.path.join(root, exp.name),
+            trainable=trainable,
+            param_space=space,
+            resume_unfinished=True,
+            resume_errored=True,
+        )
     else:
         run_config = tune.RunConfig(
             name=exp.name,
@@ -134,8 +167,12 @@ def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> i
             progress_reporter=ProgressReporter(),
             verbose=1,
         )
-        tuner = tune.Tuner(trainable, param_space=space, run_config=run_config,
-                           tune_config=tune.TuneConfig(num_samples=exp.num_samples))
+        tuner = tune.Tuner(
+            trainable,
+            param_space=space,
+            run_config=run_config,
+            tune_config=tune.TuneConfig(num_samples=exp.num_samples),
+        )
     results = tuner.fit()
     _print_summary(exp, results)
     return len(results.errors)
@@ -150,8 +187,10 @@ def _print_summary(exp: E.Experiment, results: Any) -> None:
         ckpt = result.checkpoint.path if result.checkpoint else None
         status = "ERROR" if result.error else "OK"
         ret_s = f"{ret:.2f}" if isinstance(ret, int | float) else "n/a"
-        print(f"  {status} iter={m.get('training_iteration')} env_steps={steps} "
-              f"return_mean={ret_s} checkpoint={ckpt}")
+        print(
+            f"  {status} iter={m.get('training_iteration')} env_steps={steps} "
+            f"return_mean={ret_s} checkpoint={ckpt}"
+        )
         if result.error:
             first = str(result.error).strip().splitlines()
             print(f"    error: {first[-1] if first else type(result.error).__name__}")
