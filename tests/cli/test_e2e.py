@@ -39,8 +39,9 @@ def run_cli(argv: list[str]) -> SimpleNamespace:
     t0 = time.monotonic()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         rc = main(argv)
-    return SimpleNamespace(rc=rc, out=out.getvalue(), err=err.getvalue(),
-                           seconds=time.monotonic() - t0)
+    return SimpleNamespace(
+        rc=rc, out=out.getvalue(), err=err.getvalue(), seconds=time.monotonic() - t0
+    )
 
 
 def trial_dirs(experiment_dir: Path) -> list[Path]:
@@ -106,22 +107,45 @@ def test_evaluate_finds_latest_checkpoint_in_experiment_dir(cartpole):
 
 def test_resume_finished_experiment_exits_0_without_new_trials(cartpole):
     before = trial_dirs(cartpole.exp_dir)
-    res = run_cli(["train", "file", cartpole.yaml, "--test", "--storage-path",
-                   str(cartpole.storage), "--resume"])
+    res = run_cli(
+        [
+            "train",
+            "file",
+            cartpole.yaml,
+            "--test",
+            "--storage-path",
+            str(cartpole.storage),
+            "--resume",
+        ]
+    )
     assert res.rc == 0, res.err[-2000:]
     assert trial_dirs(cartpole.exp_dir) == before
     assert last_result(before[0])["training_iteration"] == 2
 
 
 def test_asor_lava_example_test_run_reports_asor_metrics(tmp_path, cli_ray):
-    res = run_cli(["train", "file", str(REPO / "tuned_examples/lava/ppo-asor.yaml"), "--test",
-                   "--storage-path", str(tmp_path)])
+    res = run_cli(
+        [
+            "train",
+            "file",
+            str(REPO / "tuned_examples/lava/ppo-asor.yaml"),
+            "--test",
+            "--storage-path",
+            str(tmp_path),
+        ]
+    )
     assert res.rc == 0, res.err[-3000:]
     [trial] = trial_dirs(tmp_path / "lava-ppo-asor")
     assert trial.name.startswith("AsorPPO_")
     params = json.loads((trial / "params.json").read_text())  # the trial's resolved param space
-    assert params["asor"] == {"mode": "asor", "lambda_": 0.01, "rho_value": 0.5,
-                              "rho_count": 0.5, "proxy": "rnd", "reward_form": "log"}
+    assert params["asor"] == {
+        "mode": "asor",
+        "lambda_": 0.01,
+        "rho_value": 0.5,
+        "rho_count": 0.5,
+        "proxy": "rnd",
+        "reward_form": "log",
+    }
     result = last_result(trial)
     assert 0.0 <= result["asor"]["disc_acc"] <= 1.0
     assert "asor/disc_acc" in res.out  # progress-table column

@@ -107,8 +107,16 @@ def test_bad_config_json_flag_exits_2(capsys):
 
 
 def test_resume_without_previous_run_exits_2(tmp_path, capsys):
-    argv = ["train", "--run", "PPO", "--env", "CartPole-v1", "--storage-path", str(tmp_path),
-            "--resume"]
+    argv = [
+        "train",
+        "--run",
+        "PPO",
+        "--env",
+        "CartPole-v1",
+        "--storage-path",
+        str(tmp_path),
+        "--resume",
+    ]
     rc, err = _run(capsys, argv)
     assert rc == 2
     _assert_one_line(err, "--resume", "no previous run to resume at", str(tmp_path))
@@ -116,8 +124,10 @@ def test_resume_without_previous_run_exits_2(tmp_path, capsys):
 
 def test_unreachable_address_fails_fast_with_exit_2(capsys):
     t0 = time.monotonic()
-    rc, err = _run(capsys, ["train", "--run", "PPO", "--env", "CartPole-v1", "--test",
-                            "--address", "127.0.0.1:1"])
+    rc, err = _run(
+        capsys,
+        ["train", "--run", "PPO", "--env", "CartPole-v1", "--test", "--address", "127.0.0.1:1"],
+    )
     assert rc == 2
     assert time.monotonic() - t0 < 30
     _assert_one_line(err, "--address", "cannot reach a Ray cluster at 127.0.0.1:1")
@@ -133,9 +143,17 @@ def test_console_script_prints_one_line_and_exits_2(write_yaml):
     """The installed entry point (a real subprocess): no traceback, no Ray noise."""
     path = write_yaml(GOOD_HEAD + "  config: {num_workers: 2, bogus_key: 1}\n")
     proc = subprocess.run(
-        [sys.executable, "-c", "import sys; from rllib_asor.cli.main import main; sys.exit(main())",
-         "train", "file", path],
-        capture_output=True, text=True, timeout=120,
+        [
+            sys.executable,
+            "-c",
+            "import sys; from rllib_asor.cli.main import main; sys.exit(main())",
+            "train",
+            "file",
+            path,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 2
     _assert_one_line(proc.stderr, path, "x.config.bogus_key", "allowed:")

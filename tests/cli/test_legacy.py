@@ -59,7 +59,9 @@ def test_legacy_keys_produce_one_warning_each(write_yaml):
         ("timesteps_total", "num_env_steps_sampled_lifetime"),
     ]:
         assert f"'{old}' translated to '{new}'" in text
-    assert "legacy key 'model' (fcnet_activation, fcnet_hiddens) translated to 'model_config'" in text
+    assert (
+        "legacy key 'model' (fcnet_activation, fcnet_hiddens) translated to 'model_config'" in text
+    )
     assert "observation_filter: MeanStdFilter" in text
     assert all(w.startswith(path) for w in exp.warnings)
 
@@ -74,13 +76,20 @@ def test_unreachable_address_fails_before_legacy_warnings_are_printed(write_yaml
 
 def test_framework_tf_is_refused_with_torch_only_message(write_yaml):
     path = write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  config: {framework: tf2}\n")
-    with pytest.raises(UsageError, match=r"x\.config\.framework: framework 'tf2' is not supported: allowed 'torch'"):
+    with pytest.raises(
+        UsageError, match=r"x\.config\.framework: framework 'tf2' is not supported: allowed 'torch'"
+    ):
         E.load_file(path)
 
 
 def test_legacy_model_key_outside_default_model_config_is_refused(write_yaml):
-    path = write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  config: {model: {use_attention: true}}\n")
-    with pytest.raises(UsageError, match=r"x\.config\.model\.use_attention: unknown model setting; allowed: .*fcnet_hiddens"):
+    path = write_yaml(
+        "x:\n  env: CartPole-v1\n  run: PPO\n  config: {model: {use_attention: true}}\n"
+    )
+    with pytest.raises(
+        UsageError,
+        match=r"x\.config\.model\.use_attention: unknown model setting; allowed: .*fcnet_hiddens",
+    ):
         E.load_file(path)
 
 
@@ -94,14 +103,16 @@ def test_flags_build_the_same_experiment_as_yaml(write_yaml):
 
 
 def test_rl_module_block_selects_a_registered_module_class(write_yaml):
-    [exp] = E.load_file(write_yaml("""
+    [exp] = E.load_file(
+        write_yaml("""
         x:
           env: CartPole-v1
           run: PPO
           config:
             rl_module: {module_class: race_net, model_config: {pi_hiddens: [64]}}
             model_config: {vf_hiddens: [32]}
-    """))
+    """)
+    )
     cfg = E.validate(exp)
     assert cfg._rl_module_spec.module_class.__name__ == "RaceNetModule"
     assert cfg.model_config["pi_hiddens"] == [64] and cfg.model_config["vf_hiddens"] == [32]
@@ -109,19 +120,28 @@ def test_rl_module_block_selects_a_registered_module_class(write_yaml):
 
 
 def test_legacy_custom_model_becomes_rl_module_block(write_yaml):
-    [exp] = E.load_file(write_yaml("""
+    [exp] = E.load_file(
+        write_yaml("""
         x:
           env: CartPole-v1
           run: PPO
           config: {model: {custom_model: race_net, custom_model_config: {pi_hiddens: [64]}}}
-    """))
-    assert exp.config == {"rl_module": {"module_class": "race_net"},
-                          "model_config": {"pi_hiddens": [64]}}
+    """)
+    )
+    assert exp.config == {
+        "rl_module": {"module_class": "race_net"},
+        "model_config": {"pi_hiddens": [64]},
+    }
     assert any("'model.custom_model: race_net' translated to 'rl_module" in w for w in exp.warnings)
 
 
 def test_unknown_module_class_is_refused(write_yaml):
-    [exp] = E.load_file(write_yaml(
-        "x:\n  env: CartPole-v1\n  run: PPO\n  config: {rl_module: {module_class: nope_net}}\n"))
-    with pytest.raises(UsageError, match=r"x\.config\.rl_module\.module_class: .*allowed one of \['race_net'\]"):
+    [exp] = E.load_file(
+        write_yaml(
+            "x:\n  env: CartPole-v1\n  run: PPO\n  config: {rl_module: {module_class: nope_net}}\n"
+        )
+    )
+    with pytest.raises(
+        UsageError, match=r"x\.config\.rl_module\.module_class: .*allowed one of \['race_net'\]"
+    ):
         E.validate(exp)

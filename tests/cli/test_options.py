@@ -31,13 +31,21 @@ def test_bad_stop_flag_is_refused(item):
 
 
 def test_cli_stop_overrides_file_stop(write_yaml):
-    [exp] = E.load_file(write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  stop: {training_iteration: 5, timesteps_total: 9}\n"))
+    [exp] = E.load_file(
+        write_yaml(
+            "x:\n  env: CartPole-v1\n  run: PPO\n  stop: {training_iteration: 5, timesteps_total: 9}\n"
+        )
+    )
     E.apply_overrides(exp, stop={"training_iteration": 1})
     assert exp.stop == {"training_iteration": 1, "num_env_steps_sampled_lifetime": 9}
 
 
 def test_test_mode_is_tiny_with_fractional_env_runners(write_yaml):
-    [exp] = E.load_file(write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  config: {train_batch_size: 4000, minibatch_size: 512}\n"))
+    [exp] = E.load_file(
+        write_yaml(
+            "x:\n  env: CartPole-v1\n  run: PPO\n  config: {train_batch_size: 4000, minibatch_size: 512}\n"
+        )
+    )
     E.apply_overrides(exp, test=True)
     cfg = E.validate(exp)
     assert cfg.num_env_runners == 2 and cfg.num_cpus_per_env_runner == 0.5
@@ -52,12 +60,15 @@ def test_num_env_runners_and_checkpoint_flags(write_yaml):
     E.apply_overrides(exp, num_env_runners=3, checkpoint_freq=4)
     assert E.validate(exp).num_env_runners == 3
     assert E.checkpoint_kwargs(exp) == {
-        "num_to_keep": 3, "checkpoint_at_end": True, "checkpoint_frequency": 4
+        "num_to_keep": 3,
+        "checkpoint_at_end": True,
+        "checkpoint_frequency": 4,
     }
 
 
 def test_grid_search_anywhere_becomes_tune_grid_in_param_space(write_yaml):
-    [exp] = E.load_file(write_yaml("""
+    [exp] = E.load_file(
+        write_yaml("""
         x:
           env: CartPole-v1
           run: PPO
@@ -67,7 +78,8 @@ def test_grid_search_anywhere_becomes_tune_grid_in_param_space(write_yaml):
             model_config: {fcnet_hiddens: {grid_search: [[32], [64, 64]]}}
             env_config: {}
             asor: {lambda_: {grid_search: [0.0, 0.1]}, mode: srpo}
-    """))
+    """)
+    )
     space = E.param_space(exp, E.validate(exp))
     assert space["lr"] == {"grid_search": [0.001, 0.0001]}
     assert space["lambda"] == {"grid_search": [0.9, 0.95]}
@@ -101,8 +113,12 @@ def test_lava_examples_validate(name):
 
 @pytest.mark.parametrize(
     ("address", "target"),
-    [("10.0.0.1:6379", ("10.0.0.1", 6379)), ("ray://head:10001", ("head", 10001)),
-     ("head", ("head", 6379)), ("auto", None)],
+    [
+        ("10.0.0.1:6379", ("10.0.0.1", 6379)),
+        ("ray://head:10001", ("head", 10001)),
+        ("head", ("head", 6379)),
+        ("auto", None),
+    ],
 )
 def test_address_parsing(address, target):
     assert cluster.parse_address(address) == target
