@@ -51,6 +51,10 @@ class AsorConfig:
     """Adam learning rate of the discriminator."""
     label_smoothing: float = 0.0
     """Targets 1−ε / ε for real / generated; > 0 keeps ω from saturating (LAVA_STUDY.md)."""
+    aux_epochs: int = 1
+    """Passes of the discriminator and proxy over each train batch (PPO runs `num_epochs`
+    passes for the policy). One pass keeps ω from saturating (LAVA_STUDY.md) and halves
+    ASOR's cost at 6 PPO epochs."""
     rnd_hiddens: list[int] = field(default_factory=lambda: [128, 128])
     """RND target/predictor MLP hidden sizes."""
     rnd_embedding_dim: int = 64
@@ -104,7 +108,7 @@ class AsorConfig:
             ):
                 _fail(key, v, "a non-empty list of positive integers")
             setattr(self, key, list(v))
-        for key in ("rnd_embedding_dim", "ensemble_size"):
+        for key in ("rnd_embedding_dim", "ensemble_size", "aux_epochs"):
             v = getattr(self, key)
             if (
                 not isinstance(v, int)

@@ -70,6 +70,8 @@ class AsorRewardConnector(ConnectorV2):
         self.timestep_fn = timestep_fn
         self.value_fn = value_fn
         self._rng = np.random.default_rng(asor.seed)
+        self.aux_batch_sizes: dict[str, int] = {}
+        """Rows of each aux module's batch from the last call (the Learner caps passes)."""
 
     def __call__(
         self,
@@ -147,8 +149,10 @@ class AsorRewardConnector(ConnectorV2):
             )
 
         batch[ids.disc] = {Columns.OBS: features, LABEL: real.float()}
+        self.aux_batch_sizes[ids.disc] = features.shape[0]
         if ids.proxy is not None:
             batch[ids.proxy] = proxy_batch
+            self.aux_batch_sizes[ids.proxy] = features.shape[0]
         if metrics is not None:
             self._log(
                 metrics, ids.disc, lam, bonus, real, values, rewards.reshape(-1)[valid], logits

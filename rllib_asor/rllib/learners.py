@@ -61,6 +61,7 @@ class AsorLearnerMixin:
         super().build()  # type: ignore[misc]
         self.asor = AsorConfig.from_dict(self.config.learner_config_dict.get("asor"))
         self._asor_timestep = 0.0
+        self._asor_rows_trained = {}
         aux = {
             pid: AuxModuleIds(
                 disc=disc_module_id(pid),
@@ -108,6 +109,25 @@ class AsorLearnerMixin:
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
         super().before_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
         self._asor_timestep = float(timesteps.get(NUM_ENV_STEPS_SAMPLED_LIFETIME, 0) or 0)
+        self._asor_rows_trained: dict[str, int] = {}
+
+    def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
+        if self.asor_in_pipeline:
+            batch = self._cap_aux_passes(batch)
+        return super()._update(batch, **kwargs)  # type: ignore[misc]
+
+    def _cap_aux_passes(self, batch: dict[str, Any]) -> dict[str, Any]:
+        """Drop aux modules from minibatches once they had `aux_epochs` passes this update."""
+        sizes = self._asor_piece.aux_batch_sizes
+        kept = {}
+        for module_id, module_batch in batch.items():
+            if is_aux_module(module_id):
+                done = self._asor_rows_trained.get(module_id, 0)
+                if done >= self.asor.aux_epochs * sizes.get(module_id, 0):
+                    continue
+                self._asor_rows_trained[module_id] = done + len(module_batch[Columns.OBS])
+            kept[module_id] = module_batch
+        return kept
 
     def configure_optimizers_for_module(self, module_id: str, config: Any = None) -> None:
         if not is_aux_module(module_id):

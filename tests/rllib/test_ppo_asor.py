@@ -163,3 +163,18 @@ def test_with_asor_rejects_unsupported_algorithm():
 
     with pytest.raises(ValueError, match="supported"):
         rllib_asor.with_asor(DQNConfig().environment("CartPole-v1"))
+
+
+def test_aux_modules_get_aux_epochs_passes_while_policy_gets_num_epochs(algo):
+    learner = algo.learner_group._learner
+
+    def adam_steps(module_id):
+        state = learner.get_optimizer(module_id=module_id).state
+        return max(int(s["step"]) for s in state.values()) if state else 0
+
+    before = {m: adam_steps(m) for m in (DEFAULT_MODULE_ID, DISC, PROXY)}
+    algo.train()
+    steps = {m: adam_steps(m) - before[m] for m in before}
+    # num_epochs=2 for the policy, aux_epochs=1 (default) for the discriminator and RND.
+    assert steps[DISC] == steps[PROXY]
+    assert 0.35 * steps[DEFAULT_MODULE_ID] <= steps[DISC] <= 0.65 * steps[DEFAULT_MODULE_ID]
