@@ -53,7 +53,9 @@ def test_lambda_schedule_interpolates_and_holds_ends():
 
 
 def test_dual_ascent_moves_towards_constraint_and_clips():
-    assert dual_ascent_step(0.1, js_estimate=0.5, target=0.1, lr=0.1, lam_max=1.0) == pytest.approx(0.14)
+    assert dual_ascent_step(0.1, js_estimate=0.5, target=0.1, lr=0.1, lam_max=1.0) == pytest.approx(
+        0.14
+    )
     assert dual_ascent_step(0.01, js_estimate=0.0, target=0.1, lr=1.0, lam_max=1.0) == 0.0
     assert dual_ascent_step(0.9, js_estimate=0.69, target=0.0, lr=1.0, lam_max=1.0) == 1.0
 
@@ -157,6 +159,9 @@ def test_config_errors_name_key_and_allowed(settings, key):
 
 def test_config_accepts_lambda_alias_schedule_and_auto():
     assert AsorConfig.from_dict({"lambda": 0.2}).lambda_ == 0.2
-    assert AsorConfig.from_dict({"lambda_": [[0, 0], [1000, 0.1]]}).lambda_ == [[0.0, 0.0], [1000.0, 0.1]]
+    assert AsorConfig.from_dict({"lambda_": [[0, 0], [1000, 0.1]]}).lambda_ == [
+        [0.0, 0.0],
+        [1000.0, 0.1],
+    ]
     assert AsorConfig.from_dict({"lambda_": "auto"}).lambda_ == "auto"
     assert AsorConfig(mode="srpo", rho_value=0.5, rho_count=0.2).effective_rhos == (0.5, 1.0)
