@@ -16,7 +16,6 @@ from game_env.constants import FRAME_SKIP
 from game_env.maps import NUM_MAPS
 from game_env.options import (
     COURSE_SEEDS,
-    NVEC,
     check_action,
     check_course_seed,
     check_map_choice,
@@ -27,6 +26,8 @@ from game_env.options import (
 from game_env.scene import MAX_RACERS
 from game_env.sim import RaceSim
 from game_env.spaces import REWARD_TERMS, action_space, observation_space
+
+_IDLE = (1, 1, 0, 0, 0, 0, 0, 1)  # what a racer without an action this step does
 
 
 class RaceParallelEnv(ParallelEnv):
@@ -65,7 +66,6 @@ class RaceParallelEnv(ParallelEnv):
         self.sim.load(first, 0 if self._course_seed is None else self._course_seed)  # model/data exist
         self.sim.reset()
         self._renderer = None
-        self._idle_all = np.tile(np.array([1, 1, 0, 0, 0, 0, 0, 1]), (self.num_racers, 1))
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
         self._live: set[str] = set()
 
@@ -119,29 +119,21 @@ class RaceParallelEnv(ParallelEnv):
         return self._split(obs, self.agents), {a: dict(info) for a in self.agents}
 
     def _split(self, obs: dict[str, np.ndarray], agents: list[str]) -> dict[str, dict[str, np.ndarray]]:
-        items = list(obs.items())
+        keys = list(obs)
+        per_racer = list(zip(*(list(v) for v in obs.values()), strict=True))  # N tuples of views
         index = self._index
-        return {a: {k: v[index[a]] for k, v in items} for a in agents}
+        return {a: dict(zip(keys, per_racer[index[a]], strict=True)) for a in agents}
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         """One env step for every live racer; missing racers stand idle."""
-        acts = self._idle_all.copy()
-        try:  # fast path: every value already a valid int action
-            live = [a for a in actions if a in self._live]
-            rows = np.array([actions[a] for a in live])
-            ok = len(live) == len(actions) and rows.dtype.kind in "iu" and rows.shape == (len(live), 8) and (
-                (rows >= 0) & (rows < NVEC)).all()
-        except (ValueError, TypeError):
-            ok = False
-        if ok:
-            if live:
-                acts[[self._index[a] for a in live]] = rows
-        else:
-            for agent, action in actions.items():
-                if agent not in self._index:
-                    raise ValueError(f"agent {agent!r} is unknown; allowed: {self.possible_agents}")
-                if agent in self._live:
-                    acts[self._index[agent]] = check_action(action)
+        acts = [list(_IDLE) for _ in range(self.num_racers)]
+        index, live_set = self._index, self._live
+        for agent, action in actions.items():
+            i = index.get(agent)
+            if i is None:
+                raise ValueError(f"agent {agent!r} is unknown; allowed: {self.possible_agents}")
+            if agent in live_set:
+                acts[i] = check_action(action)
         sim = self.sim
         obs, terms, done, err = sim.step(acts)
         live = self.agents

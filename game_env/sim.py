@@ -269,18 +269,16 @@ class RaceSim:
         r0, r1 = self.geom2racer[g[:, 0]] >= 0, self.geom2racer[g[:, 1]] >= 0
         return np.concatenate((g[r0, 1], g[r1, 0]))
 
-    def _on_racers(self, pos: list[float]) -> list[bool]:
-        """Racers standing on another racer's head (capsules stacked)."""
-        out = [False] * self.n
+    def _on_racer(self, pos: list[float], i: int) -> bool:
+        """Whether racer ``i`` stands on another racer's head (capsules stacked)."""
         reach, top = (2 * RACER_RADIUS) ** 2, 2 * FEET
-        for i in range(self.n):
-            xi, yi, zi = pos[3 * i: 3 * i + 3]
-            for j in range(self.n):
-                if j != i:
-                    dz = zi - pos[3 * j + 2]
-                    if top - 0.45 < dz < top + 0.1 and (xi - pos[3 * j]) ** 2 + (yi - pos[3 * j + 1]) ** 2 < reach:
-                        out[i] = True
-        return out
+        xi, yi, zi = pos[3 * i: 3 * i + 3]
+        for j in range(self.n):
+            if j != i:
+                dz = zi - pos[3 * j + 2]
+                if top - 0.45 < dz < top + 0.1 and (xi - pos[3 * j]) ** 2 + (yi - pos[3 * j + 1]) ** 2 < reach:
+                    return True
+        return False
 
     def _after_physics(self, t0: float, t1: float):
         data = self.data
@@ -288,7 +286,7 @@ class RaceSim:
         vel = data.qvel[self.qvel_flat].tolist()
         if self.need_contacts:
             self.balloons.touch(self._touched())
-        supported = self._on_racers(pos) if self.n > 1 else None
+        multi = self.n > 1
         fine_h, belt_x, belt_y, tile_id, cliff_map = self.maps
         all_terms, done, floors, cliffs = [], [], [], []
         for i, r in enumerate(self.racers):
@@ -305,7 +303,7 @@ class RaceSim:
             floor, ix, iy = self._floor(pos, i)
             feet = z - FEET
             near = feet - floor < 0.06 and abs(vz) < 1.5
-            grounded = near or (supported is not None and supported[i] and vz < 1.0)
+            grounded = near or (multi and vz < 1.0 and self._on_racer(pos, i))
             r.grounded = grounded
             r.on_pad = r.on_tile = False
             if grounded:
