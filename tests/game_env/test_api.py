@@ -153,3 +153,13 @@ def test_random_play_keeps_observations_in_space_on_every_map(map_id):
 
 def test_check_env_with_rgb_array_rendering():
     check_env(ObstacleRaceEnv(map_id=1, render_mode="rgb_array", width=64, height=48, max_episode_steps=30))
+
+
+def test_make_with_max_episode_steps_truncates_with_metrics():
+    env = gym.make("game_env/ObstacleRace-v0", map_id=0, max_episode_steps=25)
+    env.reset(seed=0)
+    ends = [env.step(np.array([1, 1, 0, 0, 0, 0, 0, 1]))[2:] for _ in range(25)]
+    assert not any(t or u for t, u, _ in ends[:-1])
+    term, trunc, info = ends[-1]
+    assert trunc and not term
+    assert info["episode_metrics"]["episode_length"] == 25.0
