@@ -1,0 +1,148 @@
+"""Offline datasets (collect, layout, loading errors, scores) and one CQL+ASOR update from them."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import msgpack
+import msgpack_numpy as mnp
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+import torch
+from ray.rllib.env.single_agent_episode import SingleAgentEpisode
+
+import rllib_asor
+from rllib_asor.asor.reward import reward_bonus
+from rllib_asor.rllib import offline
+
+ENV = "rllib_asor/HopperShift-v0"
+STEPS = 200
+
+
+@pytest.fixture(scope="module")
+def dataset(ray_session, tmp_path_factory) -> Path:
+    """200 steps of uniform actions and 200 of an untrained SAC policy under each dynamics."""
+    out = tmp_path_factory.mktemp("offline")
+    return offline.collect(
+        ENV, out, STEPS, qualities=("random", "expert"), sac_steps=0, log=lambda *_: None
+    )
+
+
+def read_episodes(part: Path) -> list[SingleAgentEpisode]:
+    rows = pq.read_table(part).column("item").to_pylist()
+    return [SingleAgentEpisode.from_state(msgpack.unpackb(r, object_hook=mnp.decode)) for r in rows]
+
+
+def test_collect_writes_d4rl_layout_manifest_and_no_temp_dirs(dataset):
+    assert dataset.name == "hopper"
+    manifest = json.loads((dataset / "manifest.json").read_text())
+    assert manifest["format"] == offline.FORMAT and manifest["env"] == ENV
+    assert set(manifest["datasets"]) == {"original", "body_mass", "density_10"}
+    for dyn, parts in manifest["datasets"].items():
+        assert set(parts) == {"random", "expert"}
+        for quality, stats in parts.items():
+            assert stats["path"] == f"{dyn}/{quality}"
+            assert stats["num_steps"] >= STEPS and stats["num_episodes"] >= 1
+            assert stats["return_min"] <= stats["return_mean"] <= stats["return_max"]
+        refs = manifest["reference_returns"][dyn]
+        assert refs == {q: parts[q]["return_mean"] for q in ("random", "expert")}
+        assert (dataset / dyn / "policies" / "expert" / "module_state.pkl").is_file()
+    assert not [p for p in dataset.parent.iterdir() if p.name.startswith(".")]
+
+
+def test_parquet_rows_are_complete_rllib_episodes_matching_the_manifest(dataset):
+    manifest = offline.read_manifest(dataset)
+    stats = manifest["datasets"]["body_mass"]["random"]
+    episodes = read_episodes(dataset / "body_mass" / "random")
+    assert len(episodes) == stats["num_episodes"]
+    assert sum(len(e) for e in episodes) == stats["num_steps"]
+    assert all(e.is_done for e in episodes)
+    assert np.mean([e.get_return() for e in episodes]) == pytest.approx(stats["return_mean"])
+    assert episodes[0].get_observations(0).shape == (11,)
+    assert episodes[0].get_infos(-1)["dynamics"]["mass"] == pytest.approx(3.0)
+
+
+def test_collect_refuses_to_replace_an_existing_task_dir(dataset):
+    with pytest.raises(ValueError, match="exists; pass --overwrite"):
+        offline.collect(ENV, dataset.parent, STEPS, qualities=("random",), sac_steps=0)
+
+
+def test_bad_dataset_paths_raise_value_errors_naming_path_and_format(dataset, tmp_path):
+    missing = tmp_path / "nope"
+    with pytest.raises(ValueError, match=f"{missing}.*does not exist.*offline collect"):
+        offline.load_dataset(missing)
+    with pytest.raises(ValueError, match=f"no manifest.json in {tmp_path}.*offline collect"):
+        offline.load_dataset(tmp_path)
+    (tmp_path / "manifest.json").write_text(json.dumps({"format": "d4rl-hdf5"}))
+    with pytest.raises(ValueError, match="format 'd4rl-hdf5', expected 'rllib_asor.offline/v1'"):
+        offline.load_dataset(tmp_path)
+    with pytest.raises(ValueError, match="dynamics 'mass_x2' not in"):
+        offline.load_dataset(dataset, dynamics="mass_x2")
+    with pytest.raises(ValueError, match="quality 'medium' not in .*allowed random \\| expert"):
+        offline.load_dataset(dataset, quality="medium")
+
+
+def test_load_dataset_selects_parts_from_task_dir_or_part_dir(dataset):
+    whole = offline.load_dataset(dataset, quality="random")
+    assert len(whole.paths) == 3 and whole.dynamics == ("original", "body_mass", "density_10")
+    part = offline.load_dataset(dataset / "density_10" / "expert")
+    assert part.dynamics == ("density_10",) and part.qualities == ("expert",)
+    assert part.paths == ((dataset / "density_10" / "expert").resolve().as_posix(),)
+
+
+def test_normalized_score_is_0_at_random_and_100_at_expert(dataset):
+    refs = offline.read_manifest(dataset)["reference_returns"]["original"]
+    assert offline.normalized_score(refs["random"], "hopper", dataset) == pytest.approx(0.0)
+    assert offline.normalized_score(refs["expert"], "hopper", dataset) == pytest.approx(100.0)
+    with pytest.raises(ValueError, match="not 'walker2d'"):
+        offline.normalized_score(1.0, "walker2d", dataset)
+
+
+def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dataset):
+    from ray.rllib.algorithms.cql import CQLConfig
+
+    config = (
+        CQLConfig()
+        .env_runners(num_env_runners=0)
+        .learners(num_learners=0)
+        .training(train_batch_size_per_learner=64, bc_iters=0, lr=None)
+        .reporting(min_time_s_per_iteration=0, min_train_timesteps_per_iteration=0)
+    )
+    # dataset_num_iters_per_learner=1 with num_learners=0 trips RLlib 2.60 (docs/offline.md).
+    offline.offline_input(config, dataset, dataset_num_iters_per_learner=2)
+    algo = rllib_asor.with_asor(config, lambda_=0.1, seed=0).build_algo()
+    try:
+        result = algo.train()
+        asor = result["asor"]
+        assert asor["real_fraction"] == pytest.approx(0.25, abs=0.02)
+        assert asor["aug_reward_mean"] < 0 and asor["aug_reward_max"] <= 0
+        assert np.isfinite(asor["disc_loss"]) and np.isfinite(asor["rnd_loss"])
+
+        # The rewards CQL's TD target sees are r + λ·log ω(s), ω from the discriminator
+        # before this update's step.
+        learner = algo.learner_group._learner
+        eps = read_episodes(dataset / "original" / "expert")[0]
+        n = len(eps)
+        obs = np.asarray(eps.get_observations(slice(0, n + 1)), dtype=np.float32)
+        term = np.zeros(n, dtype=np.float32)
+        term[-1] = float(eps.is_terminated)
+        pb = {
+            "obs": torch.from_numpy(obs[:-1]),
+            "new_obs": torch.from_numpy(obs[1:]),
+            "actions": torch.as_tensor(np.asarray(eps.get_actions()), dtype=torch.float32),
+            "rewards": torch.as_tensor(np.asarray(eps.get_rewards()), dtype=torch.float32),
+            "terminateds": torch.from_numpy(term),
+        }
+        env_rewards = pb["rewards"].clone()
+        disc = learner.module["asor_disc.default_policy"]
+        with torch.no_grad():
+            expected = env_rewards + 0.1 * reward_bonus(disc.logits(pb["obs"]), "log", -5.0)
+        batch = {"default_policy": pb}
+        learner._update(batch)
+        assert torch.allclose(batch["default_policy"]["rewards"], expected, atol=1e-6)
+        assert (batch["default_policy"]["rewards"] < env_rewards).all()
+        assert batch["asor_disc.default_policy"]["asor_label"].sum() > 0
+    finally:
+        algo.stop()
