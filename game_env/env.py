@@ -121,8 +121,9 @@ class ObstacleRaceEnv(gym.Env):
             warnings.warn(err, RuntimeWarning, stacklevel=2)
             info["physics_error"] = err
             truncated = True
-        if terminated or truncated:
-            info["episode_metrics"] = sim.episode_metrics(0)
+        # Every step: running values, final on the last step. (An outer TimeLimit from
+        # gymnasium.make(max_episode_steps=...) truncates without this env knowing.)
+        info["episode_metrics"] = sim.episode_metrics(0)
         return {k: v[0] for k, v in obs.items()}, reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
