@@ -1,0 +1,308 @@
+"""Obstacle race: PPO vs PPO+SRPO vs PPO+ASOR at an equal env-step budget (the paper's table).
+
+Every run trains the race network (`race_net`) on the single-racer race with a map drawn per
+episode from all ten maps, for the same number of env steps; then its policy is evaluated on
+each of the ten maps (fixed course seeds) and the paper's table columns are reported: success
+rate, trapped rate, unnecessary-jump rate, distance from cliff, goal reward, total reward.
+Two reference rows use the same evaluation episodes: the scripted racer (`game_env.scripted`,
+privileged, the expert) and a uniformly random policy.
+
+    python -m benchmarks.race_learning --seeds 1 --steps 8192 --out benchmarks/out/race_learning
+
+Methods are named as in `benchmarks.lava_reproduction` (`name:key=value,...` over AsorConfig
+fields; `ppo` = no ASOR). ASOR and SRPO see `RACE_ASOR_OBS_KEYS` unless `obs_keys` is given.
+Runs already written under OUT/runs are kept (a rerun only adds what is missing);
+`--summarize-only` rebuilds the tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.lava_reproduction import parse_method
+
+DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
+COLUMNS = (
+    ("success", "success rate"),
+    ("trapped", "trapped rate"),
+    ("unnecessary_jump_rate", "unnecessary-jump rate"),
+    ("distance_from_cliff", "distance from cliff (m)"),
+    ("goal_reward", "goal reward"),
+    ("total_reward", "total reward"),
+)
+"""(key of `info["episode_metrics"]`, column title) of the paper's table."""
+EVAL_SEED0 = 10_000
+"""Course seeds of the evaluation episodes: EVAL_SEED0 + episode index (unseen in training
+with probability 1: training draws course seeds 0..999)."""
+
+
+def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace) -> Any:
+    """The shared PPO config (identical for every method), plus ASOR when given."""
+    import rllib_asor
+    from rllib_asor.rllib.race import RACE_ASOR_OBS_KEYS, race_ppo_config
+
+    config = (
+        race_ppo_config(num_racers=1, map_id=None, max_episode_steps=args.max_episode_steps)
+        .env_runners(num_env_runners=0, num_envs_per_env_runner=args.envs)
+        .training(
+            lr=[[0, 1e-3], [args.steps, 3e-4]],
+            gamma=0.99,
+            lambda_=0.95,
+            entropy_coeff=0.003,
+            train_batch_size=args.batch,
+            minibatch_size=256,
+            num_epochs=args.epochs,
+        )
+        .debugging(seed=seed)
+    )
+    if asor is not None:
+        settings = {"seed": seed, "obs_keys": list(RACE_ASOR_OBS_KEYS)} | asor
+        config = rllib_asor.with_asor(config, **settings)
+    return config
+
+
+def evaluate(policy: Any, episodes: int, max_steps: int) -> dict[str, Any]:
+    """Run `policy` on every map × `episodes` course seeds, all envs stepped together.
+
+    `policy(obs_batch: dict[str, np.ndarray], envs) -> actions [N, 8]`. Returns the per-map
+    mean of each column and the per-episode metrics.
+    """
+    import game_env
+    from game_env.env import ObstacleRaceEnv
+
+    pairs = [(m, EVAL_SEED0 + e) for m in range(game_env.NUM_MAPS) for e in range(episodes)]
+    # The limit goes to the constructor (a TimeLimit wrapper alone is not seen by the env).
+    envs = [ObstacleRaceEnv(map_id=m, course_seed=s, max_episode_steps=max_steps) for m, s in pairs]
+    obs = [env.reset(seed=s)[0] for env, (_, s) in zip(envs, pairs, strict=True)]
+    metrics: list[dict[str, float] | None] = [None] * len(envs)
+    while any(m is None for m in metrics):
+        live = [i for i, m in enumerate(metrics) if m is None]
+        batch = {k: np.stack([obs[i][k] for i in live]) for k in obs[live[0]]}
+        actions = policy(batch, [envs[i] for i in live])
+        for i, a in zip(live, actions, strict=True):
+            obs[i], _, term, trunc, info = envs[i].step(a)
+            if term or trunc:
+                metrics[i] = dict(info["episode_metrics"])
+    for env in envs:
+        env.close()
+    per_map: dict[int, dict[str, float]] = {}
+    for m in range(game_env.NUM_MAPS):
+        rows = [metrics[i] for i, (mm, _) in enumerate(pairs) if mm == m]
+        per_map[m] = {k: float(np.mean([r[k] for r in rows])) for k, _ in COLUMNS}
+    return {"per_map": per_map, "episodes": [[m, s, em] for (m, s), em in zip(pairs, metrics, strict=True)]}
+
+
+def module_policy(module: Any, explore: bool) -> Any:
+    """Batched policy from the trained RLModule (stochastic unless `explore` is False)."""
+    import torch
+    from ray.rllib.core import Columns
+
+    dist_cls = (
+        module.get_exploration_action_dist_cls() if explore else module.get_inference_action_dist_cls()
+    )
+
+    def act(batch: dict[str, np.ndarray], envs: list[Any]) -> np.ndarray:
+        with torch.no_grad():
+            obs = {k: torch.as_tensor(v) for k, v in batch.items()}
+            logits = module.forward_inference({Columns.OBS: obs})[Columns.ACTION_DIST_INPUTS]
+            dist = dist_cls.from_logits(logits)
+            if not explore:
+                dist = dist.to_deterministic()
+            return dist.sample().numpy()
+
+    return act
+
+
+def random_policy(seed: int = 0) -> Any:
+    import game_env
+
+    space = game_env.action_space()
+    space.seed(seed)
+    return lambda batch, envs: np.stack([space.sample() for _ in envs])
+
+
+def scripted_policy() -> Any:
+    from game_env.scripted import ScriptedRacer
+
+    racers: dict[int, Any] = {}
+
+    def act(batch: dict[str, np.ndarray], envs: list[Any]) -> np.ndarray:
+        out = []
+        for env in envs:
+            if id(env) not in racers:
+                racers[id(env)] = ScriptedRacer(env)
+            out.append(racers[id(env)].act())
+        return np.stack(out)
+
+    return act
+
+
+def _write(path: Path, data: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data))
+    os.replace(tmp, path)
+
+
+def run_one(config: dict[str, Any]) -> dict[str, Any]:
+    """Tune function trainable: train one (method, seed) to the budget, then evaluate."""
+    spec = config["spec"]
+    import torch
+    from ray import tune
+
+    from rllib_asor.rllib.race import register_race_envs
+
+    torch.set_num_threads(1)
+    register_race_envs()
+    args = argparse.Namespace(**spec["args"])
+    algo = race_config(spec["seed"], spec["asor"], args).build_algo()
+    curve = []
+    steps, t0 = 0, time.time()
+    result: dict[str, Any] = {}
+    while steps < args.steps:
+        result = algo.train()
+        steps = result["num_env_steps_sampled_lifetime"]
+        ret = result["env_runners"].get("episode_return_mean", float("nan"))
+        race = result.get("race", {})
+        curve.append([steps, ret, race.get("success_rate", float("nan"))])
+        tune.report({"steps": steps, "episode_return_mean": ret})
+    train_s = time.time() - t0
+    t1 = time.time()
+    ev = evaluate(module_policy(algo.get_module(), explore=not args.greedy), args.eval_episodes,
+                  args.max_episode_steps)
+    final = {
+        "method": spec["method"],
+        "seed": spec["seed"],
+        "steps": steps,
+        "train_wall_s": train_s,
+        "eval_wall_s": time.time() - t1,
+        "eval": ev,
+        "curve": curve,
+        "race_last": {k: float(v) for k, v in result.get("race", {}).items()},
+        "asor_last": {k: float(v) for k, v in result.get("asor", {}).items()},
+    }
+    _write(Path(spec["out"]) / "runs" / f"{spec['method']}-{spec['seed']}.json", final)
+    algo.stop()
+    tune.report({"steps": steps, "done": True})
+    return final
+
+
+def reference_rows(out: Path, args: argparse.Namespace) -> None:
+    """Scripted racer and random policy on the evaluation episodes (written once)."""
+    for name, make in (("scripted", scripted_policy), ("random", random_policy)):
+        path = out / "reference" / f"{name}.json"
+        if path.exists():
+            continue
+        t0 = time.time()
+        ev = evaluate(make(), args.eval_episodes, args.max_episode_steps)
+        _write(path, {"method": name, "eval": ev, "eval_wall_s": time.time() - t0})
+
+
+def _row(name: str, evs: list[dict[str, Any]], steps: str, n: str) -> tuple[str, dict[str, Any]]:
+    """Markdown row: mean over runs of the mean over the ten maps (± std over runs)."""
+    cells, summary = [], {}
+    for key, _ in COLUMNS:
+        per_run = np.array([np.mean([ev["per_map"][m][key] for m in ev["per_map"]]) for ev in evs])
+        sd = float(per_run.std(ddof=1)) if len(per_run) > 1 else 0.0
+        summary[key] = {"mean": float(per_run.mean()), "std": sd}
+        cells.append(f"{per_run.mean():.3f}" + (f" ± {sd:.3f}" if len(per_run) > 1 else ""))
+    return f"| {name} | {n} | {steps} | " + " | ".join(cells) + " |", summary
+
+
+def summarize(out: Path, methods: list[str]) -> str:
+    """Markdown tables (overall and success per map) + summary.json from the run files."""
+    runs = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*.json"))]
+    refs = {p.stem: json.loads(p.read_text()) for p in sorted((out / "reference").glob("*.json"))}
+    head = "| policy | runs | env steps | " + " | ".join(t for _, t in COLUMNS) + " |"
+    lines = [head, "|---|---|---|" + "---|" * len(COLUMNS)]
+    table: dict[str, Any] = {}
+    per_map_lines = [
+        "| policy | " + " | ".join(f"map {m}" for m in range(10)) + " |",
+        "|---|" + "---|" * 10,
+    ]
+    for name in methods:
+        rs = [r for r in runs if r["method"] == name]
+        if not rs:
+            continue
+        steps = str(int(np.mean([r["steps"] for r in rs])))
+        line, summary = _row(name, [r["eval"] for r in rs], steps, str(len(rs)))
+        summary["seeds"] = [r["seed"] for r in rs]
+        summary["train_wall_s"] = [r["train_wall_s"] for r in rs]
+        table[name] = summary
+        lines.append(line)
+        succ = [np.mean([r["eval"]["per_map"][str(m)]["success"] for r in rs]) for m in range(10)]
+        per_map_lines.append(f"| {name} | " + " | ".join(f"{v:.2f}" for v in succ) + " |")
+    for name in ("random", "scripted"):
+        if name in refs:
+            line, summary = _row(f"{name} (reference)", [refs[name]["eval"]], "–", "–")
+            table[name] = summary
+            lines.append(line)
+            succ = [refs[name]["eval"]["per_map"][str(m)]["success"] for m in range(10)]
+            per_map_lines.append(f"| {name} | " + " | ".join(f"{v:.2f}" for v in succ) + " |")
+    (out / "summary.json").write_text(json.dumps(table, indent=1))
+    md = "\n".join(lines) + "\n\nSuccess rate per map:\n\n" + "\n".join(per_map_lines) + "\n"
+    (out / "table.md").write_text(md)
+    return md
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
+    parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--steps", type=int, default=8192, help="env steps per run")
+    parser.add_argument("--batch", type=int, default=1024, help="train batch (env steps)")
+    parser.add_argument("--epochs", type=int, default=4)
+    parser.add_argument("--envs", type=int, default=8, help="vectorised envs (local sampling)")
+    parser.add_argument("--max-episode-steps", type=int, default=1000)
+    parser.add_argument("--eval-episodes", type=int, default=1, help="episodes per map")
+    parser.add_argument("--greedy", action="store_true", help="evaluate the argmax policy")
+    parser.add_argument("--parallel", type=int, default=3, help="trials at once (1 CPU each)")
+    parser.add_argument("--out", default="benchmarks/out/race_learning")
+    parser.add_argument("--summarize-only", action="store_true")
+    args = parser.parse_args(argv)
+    out = Path(args.out).resolve()
+    methods = [parse_method(m) for m in args.methods]
+    names = [n for n, _ in methods]
+    if not args.summarize_only:
+        import ray
+        from ray import tune
+
+        os.environ.setdefault("OMP_NUM_THREADS", "1")
+        t0 = time.time()
+        reference_rows(out, args)
+        print(f"reference rows in {time.time() - t0:.0f} s", flush=True)
+        ray.init(
+            address="local", num_cpus=args.parallel, include_dashboard=False, log_to_driver=False
+        )
+        keys = ("steps", "batch", "epochs", "envs", "max_episode_steps", "eval_episodes", "greedy")
+        shared = {k: v for k, v in vars(args).items() if k in keys}
+        specs = [
+            {"method": n, "asor": a, "seed": s, "args": shared, "out": str(out)}
+            for s in range(args.seeds)
+            for n, a in methods
+            if not (out / "runs" / f"{n}-{s}.json").exists()
+        ]
+        t0 = time.time()
+        if specs:
+            tune.Tuner(
+                tune.with_resources(run_one, {"cpu": 1}),
+                param_space={"spec": tune.grid_search(specs)},
+                run_config=tune.RunConfig(storage_path=str(out / "tune"), verbose=0),
+            ).fit()
+        print(f"trained {len(specs)} runs in {time.time() - t0:.0f} s")
+    md = summarize(out, names)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
