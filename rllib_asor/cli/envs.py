@@ -19,6 +19,30 @@ def import_registering_modules() -> None:
             pass
 
 
+def race_creators() -> dict[str, Any]:
+    """Tune name -> creator of the race envs (`rllib_asor.rllib.race`); {} without game_env."""
+    try:
+        import game_env  # noqa: F401
+
+        from rllib_asor.rllib import race
+    except ImportError:
+        return {}
+    return {race.SINGLE_ENV: race.make_single_race_env, race.MULTI_ENV: race.make_multi_race_env}
+
+
+def register_race_envs() -> None:
+    """`rllib_asor.rllib.race.register_race_envs()` when game_env is installed.
+
+    The race's own creators hand `max_episode_steps` to the env (a plain `gym.make` would
+    only wrap a TimeLimit the env does not see, losing the end-of-episode metrics) and add
+    the multi-racer PettingZoo env `game_env/ObstacleRaceMulti-v0`.
+    """
+    if race_creators():
+        from rllib_asor.rllib.race import register_race_envs as register
+
+        register()
+
+
 def _in_tune_registry(env_id: str) -> bool:
     from ray.tune.registry import ENV_CREATOR, _global_registry
 
@@ -30,6 +54,7 @@ def env_exists(env_id: str) -> bool:
     import gymnasium as gym
 
     import_registering_modules()
+    register_race_envs()
     return env_id in gym.registry or _in_tune_registry(env_id)
 
 
@@ -40,6 +65,7 @@ def known_ids(limit: int = 12) -> str:
     import_registering_modules()
     ids = sorted(gym.registry)
     ours = [i for i in ids if i.startswith(("rllib_asor/", "game_env/"))]
+    ours += [i for i in race_creators() if i not in ours]
     common = [i for i in ("CartPole-v1", "Pendulum-v1", "MountainCar-v0") if i in gym.registry]
     shown = (ours + common)[:limit]
     return ", ".join(shown) + f" (or any of the {len(ids)} gymnasium ids)"
@@ -50,6 +76,9 @@ def make_env(env_id: str, env_config: Any) -> Any:
     import gymnasium as gym
 
     import_registering_modules()
+    creator = race_creators().get(env_id)
+    if creator is not None:
+        return creator(env_config)
     return gym.make(env_id, **dict(env_config or {}))
 
 
@@ -62,5 +91,6 @@ def register_with_tune(env_id: str) -> None:
     from ray import tune
 
     import_registering_modules()
+    register_race_envs()
     if env_id in gym.registry and not _in_tune_registry(env_id):
         tune.register_env(env_id, functools.partial(make_env, env_id))

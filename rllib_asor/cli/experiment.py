@@ -21,7 +21,7 @@ from typing import Any
 
 import yaml
 
-from rllib_asor.cli import grid, legacy
+from rllib_asor.cli import grid, legacy, multi_agent
 from rllib_asor.cli.errors import UsageError
 
 SPEC_KEYS = ("env", "run", "stop", "config", "checkpoint_config", "num_samples", "storage_path")
@@ -34,7 +34,13 @@ CHECKPOINT_KEYS = (
 )
 DEFAULT_NUM_TO_KEEP = 3
 # Config keys that are not plain AlgorithmConfig attributes but that we apply ourselves.
-SPECIAL_CONFIG_KEYS = ("model_config", "env_config", "env_to_module_connector", "rl_module")
+SPECIAL_CONFIG_KEYS = (
+    "model_config",
+    "env_config",
+    "env_to_module_connector",
+    "rl_module",
+    "multi_agent",
+)
 # Config key (as written) -> key in AlgorithmConfig.to_dict() (the Tune param space).
 PARAM_SPACE_KEYS = {
     "model_config": "_model_config",
@@ -367,6 +373,14 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
         env_config = values.pop("env_config", None) or {}
         connector = values.pop("env_to_module_connector", None)
         rl_module = values.pop("rl_module", None)
+        multi = values.pop("multi_agent", None)
+        if multi is not None:
+            try:
+                cfg.multi_agent(**multi_agent.parse(multi))
+            except ValueError as e:
+                raise UsageError(
+                    _one_line(e), source=exp.source, key=f"{exp.name}.config.multi_agent"
+                ) from None
         if rl_module is not None:
             cfg.rl_module(rl_module_spec=_module_spec(rl_module, exp))
         cfg.environment(env=exp.env, env_config=env_config)
@@ -380,6 +394,12 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
             raise UsageError(
                 f"invalid value: {_one_line(e)}", source=exp.source, key=f"{exp.name}.config"
             ) from None
+        if exp.env.startswith("game_env/") and not {"callbacks", "callbacks_class"} & set(
+            exp.config
+        ):  # the race's metrics (race/...) unless the file names its own callbacks
+            from rllib_asor.rllib.race import RaceMetricsCallback
+
+            cfg.callbacks(RaceMetricsCallback)
     return cfg
 
 
@@ -403,6 +423,12 @@ def _one_line(e: BaseException) -> str:
 
 
 def _check_grids(exp: Experiment) -> None:
+    if any(True for _ in grid.find_grids(exp.config.get("multi_agent") or {})):
+        raise UsageError(
+            "grid_search is not allowed here: allowed fixed policies and policy_mapping_fn",
+            source=exp.source,
+            key=f"{exp.name}.config.multi_agent",
+        )
     for tree, prefix in ((exp.config, "config"), (exp.asor or {}, "config.asor")):
         for path, candidates in grid.find_grids(tree):
             if not isinstance(candidates, list) or not candidates:
@@ -469,7 +495,7 @@ def validate_env(exp: Experiment) -> None:
                 source=exp.source,
                 key=f"{exp.name}.env",
             )
-        if exp.env not in gym.registry:
+        if exp.env not in gym.registry and exp.env not in envs.race_creators():
             return  # registered with Tune by someone else: built only on the env runners
         tree = exp.config.get("env_config") or {}
         points: list[dict[grid.Path, Any]] = [{}]
