@@ -61,6 +61,9 @@ TEST_CPUS_PER_ENV_RUNNER = 0.5
 TEST_BATCH = 256
 TEST_MINIBATCH = 64
 TEST_DATASET_ITERS = 2
+TEST_RACE_EPISODE_STEPS = 100
+"""`--test` on a race env (game_env/*): episode limit, so episodes end (and `race/*` metrics
+appear) within the 2 × 256 env steps."""
 
 
 @dataclass
@@ -253,6 +256,10 @@ def apply_overrides(
             cfg["num_env_runners"] = TEST_ENV_RUNNERS
             cfg["num_cpus_per_env_runner"] = TEST_CPUS_PER_ENV_RUNNER
             cfg["num_envs_per_env_runner"] = 1
+            if exp.env.startswith("game_env/"):
+                env_config = dict(cfg.get("env_config") or {})
+                env_config["max_episode_steps"] = TEST_RACE_EPISODE_STEPS
+                cfg["env_config"] = env_config
         cfg["num_learners"] = 0
         cfg["evaluation_interval"] = None
         cfg.pop("train_batch_size_per_learner", None)

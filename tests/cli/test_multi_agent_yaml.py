@@ -131,3 +131,15 @@ def test_bad_race_env_config_is_refused_before_ray(write_yaml):
     )
     with pytest.raises(UsageError, match=r"x\.config\.env_config: .*cannot be built"):
         E.validate(exp)
+
+
+def test_test_mode_shortens_race_episodes_so_race_metrics_appear(write_yaml):
+    [exp] = E.load_file(
+        write_yaml(
+            "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n"
+            "  config: {env_config: {map_id: 3, max_episode_steps: 1000}}\n"
+        )
+    )
+    E.apply_overrides(exp, test=True)
+    assert exp.config["env_config"] == {"map_id": 3, "max_episode_steps": E.TEST_RACE_EPISODE_STEPS}
+    assert E.validate(exp).env_config["max_episode_steps"] == E.TEST_RACE_EPISODE_STEPS

@@ -1,0 +1,83 @@
+"""tuned_examples/race/*.yaml and sweeps/race-*.yaml: all validate; ppo-asor.yaml runs with --test.
+
+The `--test` run is the README's `make train` (in-process `main([...])`, Ray reused); it is
+marked `slow` (a few minutes on 2 busy cores). The other files are only validated
+(`experiment.validate`: the env is built, RLlib's `AlgorithmConfig.validate()` runs).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import pytest
+
+from rllib_asor.cli import experiment as E
+from rllib_asor.cli.main import main
+
+REPO = Path(__file__).resolve().parents[2]
+RACE_YAMLS = sorted((REPO / "tuned_examples/race").glob("*.yaml")) + sorted(
+    (REPO / "tuned_examples/sweeps").glob("race-*.yaml")
+)
+
+
+def test_race_examples_exist():
+    names = {p.name for p in RACE_YAMLS}
+    assert {"ppo.yaml", "ppo-srpo.yaml", "ppo-asor.yaml", "ppo-asor-multi.yaml"} <= names
+    assert "race-asor.yaml" in names
+
+
+@pytest.mark.parametrize("path", RACE_YAMLS, ids=lambda p: p.name)
+def test_race_example_validates_with_paper_settings(path):
+    for exp in E.load_file(str(path)):
+        cfg = E.validate(exp)
+        assert exp.warnings == []  # no legacy keys in our own examples
+        assert exp.env.startswith("game_env/ObstacleRace")
+        assert cfg._rl_module_spec.module_class.__name__ == "RaceNetModule"
+        assert cfg.callbacks_class.__name__ == "RaceMetricsCallback"
+        assert cfg.train_batch_size == 1024 and cfg.entropy_coeff == 0.003
+        assert cfg.lr[0] == [0, 1e-3] and cfg.lr[-1][1] == 3e-4
+        assert cfg.num_env_runners == 2 and cfg.num_cpus_per_env_runner == 0.5
+        assert cfg.env_config["map_id"] == "random"
+        if exp.asor is not None:
+            assert exp.asor["obs_keys"] == ["agent", "destination"]
+        if exp.env.endswith("Multi-v0"):
+            assert cfg.is_multi_agent and set(cfg.policies) == {"shared"}
+            assert cfg.policy_mapping_fn("racer_3", None) == "shared"
+
+
+def test_race_sweep_expands_lambda_rho_and_seeds():
+    [exp] = E.load_file(str(REPO / "tuned_examples/sweeps/race-asor.yaml"))
+    assert exp.num_trials == 24
+    space = E.param_space(exp, E.validate(exp))
+    assert set(space["asor"]) >= {"lambda_", "rho_value", "rho_count"}
+    assert "grid_search" in space["seed"]
+
+
+@pytest.mark.slow
+def test_ppo_asor_example_test_run_reports_asor_and_race_metrics(tmp_path, ray_session):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main(
+            [
+                "train",
+                "file",
+                str(REPO / "tuned_examples/race/ppo-asor.yaml"),
+                "--test",
+                "--storage-path",
+                str(tmp_path),
+            ]
+        )
+    assert rc == 0, err.getvalue()[-3000:]
+    [trial] = [p for p in (tmp_path / "race-ppo-asor").iterdir() if p.is_dir()]
+    assert trial.name.startswith("AsorPPO_game_env_ObstacleRace-v0")
+    lines = (trial / "result.json").read_text().strip().splitlines()
+    result = json.loads(lines[-1])
+    assert result["training_iteration"] == 2
+    assert 0.0 <= result["asor"]["disc_acc"] <= 1.0
+    assert "rnd_loss" in result["asor"]
+    race = result["race"]
+    assert 0.0 <= race["success_rate"] <= 1.0 and 0.0 <= race["trapped_rate"] <= 1.0
+    assert race["policy_entropy"] > 0.0
