@@ -96,7 +96,10 @@ def evaluate(policy: Any, episodes: int, max_steps: int) -> dict[str, Any]:
     for m in range(game_env.NUM_MAPS):
         rows = [metrics[i] for i, (mm, _) in enumerate(pairs) if mm == m]
         per_map[m] = {k: float(np.mean([r[k] for r in rows])) for k, _ in COLUMNS}
-    return {"per_map": per_map, "episodes": [[m, s, em] for (m, s), em in zip(pairs, metrics, strict=True)]}
+    return {
+        "per_map": per_map,
+        "episodes": [[m, s, em] for (m, s), em in zip(pairs, metrics, strict=True)],
+    }
 
 
 def module_policy(module: Any, explore: bool) -> Any:
@@ -105,7 +108,9 @@ def module_policy(module: Any, explore: bool) -> Any:
     from ray.rllib.core import Columns
 
     dist_cls = (
-        module.get_exploration_action_dist_cls() if explore else module.get_inference_action_dist_cls()
+        module.get_exploration_action_dist_cls()
+        if explore
+        else module.get_inference_action_dist_cls()
     )
 
     def act(batch: dict[str, np.ndarray], envs: list[Any]) -> np.ndarray:
@@ -175,8 +180,11 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
         tune.report({"steps": steps, "episode_return_mean": ret})
     train_s = time.time() - t0
     t1 = time.time()
-    ev = evaluate(module_policy(algo.get_module(), explore=not args.greedy), args.eval_episodes,
-                  args.max_episode_steps)
+    ev = evaluate(
+        module_policy(algo.get_module(), explore=not args.greedy),
+        args.eval_episodes,
+        args.max_episode_steps,
+    )
     final = {
         "method": spec["method"],
         "seed": spec["seed"],

@@ -23,7 +23,6 @@ def race_creators() -> dict[str, Any]:
     """Tune name -> creator of the race envs (`rllib_asor.rllib.race`); {} without game_env."""
     try:
         import game_env  # noqa: F401
-
         from rllib_asor.rllib import race
     except ImportError:
         return {}

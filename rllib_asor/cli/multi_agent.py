@@ -68,7 +68,9 @@ def _mapping_fn(value: Any, policies: list[str]) -> Callable[..., str]:
             f"multi_agent.policy_mapping_fn={value!r} cannot be imported ({e}): allowed {allowed}"
         ) from None
     if not callable(fn):
-        raise ValueError(f"multi_agent.policy_mapping_fn={value!r} is not callable: allowed {allowed}")
+        raise ValueError(
+            f"multi_agent.policy_mapping_fn={value!r} is not callable: allowed {allowed}"
+        )
     return fn
 
 

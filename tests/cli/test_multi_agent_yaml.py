@@ -10,9 +10,8 @@ import pickle
 
 import pytest
 
-from rllib_asor.cli import envs
+from rllib_asor.cli import envs, multi_agent
 from rllib_asor.cli import experiment as E
-from rllib_asor.cli import multi_agent
 from rllib_asor.cli.errors import UsageError
 
 MULTI = """
