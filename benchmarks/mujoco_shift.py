@@ -31,7 +31,13 @@ import numpy as np
 
 DEFAULT_METHODS = ("sac", "srpo:mode=srpo", "asor:mode=asor")
 EVAL_DYNAMICS = ("original", "body_mass", "density_10")
-ASOR_BASE = {"lambda_": 0.05, "rho_value": 0.5, "rho_count": 0.5, "proxy": "rnd", "reward_form": "log"}
+ASOR_BASE = {
+    "lambda_": 0.05,
+    "rho_value": 0.5,
+    "rho_count": 0.5,
+    "proxy": "rnd",
+    "reward_form": "log",
+}
 
 
 def parse_method(text: str) -> tuple[str, dict[str, Any] | None]:
@@ -58,7 +64,9 @@ def sac_config(task: str, seed: int, asor: dict[str, Any] | None, args: argparse
     # Native ratio with one local env: 256 replayed rows per sampled step; utd·256 per step.
     config = (
         SACConfig()
-        .environment(f"rllib_asor/{task}Shift-v0", env_config={"params": ["mass", "damping", "wind"]})
+        .environment(
+            f"rllib_asor/{task}Shift-v0", env_config={"params": ["mass", "damping", "wind"]}
+        )
         .env_runners(num_env_runners=0, num_envs_per_env_runner=1)
         .training(
             gamma=0.99,
@@ -90,12 +98,16 @@ def deterministic_action(module: Any, obs: np.ndarray) -> np.ndarray:
     from ray.rllib.core import Columns
 
     with torch.no_grad():
-        out = module.forward_inference({Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None]})
+        out = module.forward_inference(
+            {Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None]}
+        )
         dist = module.get_inference_action_dist_cls().from_logits(out[Columns.ACTION_DIST_INPUTS])
         return dist.to_deterministic().sample()[0].numpy()
 
 
-def evaluate(module: Any, task: str, episodes: int, seed: int = 1000) -> dict[str, dict[str, float]]:
+def evaluate(
+    module: Any, task: str, episodes: int, seed: int = 1000
+) -> dict[str, dict[str, float]]:
     """Mean return and length of the deterministic policy under each fixed dynamics."""
     import gymnasium as gym
 
@@ -127,13 +139,18 @@ def train(task: str, seed: int, asor: dict[str, Any] | None, args: argparse.Name
         steps = result["num_env_steps_sampled_lifetime"]
         ret = result["env_runners"].get("episode_return_mean", float("nan"))
         curve.append([int(steps), float(ret)])
-        print(f"  {task} seed={seed} asor={asor is not None} steps={steps} return={ret:.1f} "
-              f"t={time.time() - t0:.0f}s", flush=True)
+        print(
+            f"  {task} seed={seed} asor={asor is not None} steps={steps} return={ret:.1f} "
+            f"t={time.time() - t0:.0f}s",
+            flush=True,
+        )
     stats = {k: float(v) for k, v in result.get("asor", {}).items() if np.isscalar(v)}
     return algo, curve, stats, time.time() - t0
 
 
-def run_one(task: str, method: str, seed: int, asor: dict[str, Any] | None, args: argparse.Namespace) -> dict:
+def run_one(
+    task: str, method: str, seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
+) -> dict:
     algo, curve, stats, wall = train(task, seed, asor, args)
     try:
         ev = evaluate(algo.get_module(), task, args.eval_episodes)
@@ -151,7 +168,9 @@ def run_one(task: str, method: str, seed: int, asor: dict[str, Any] | None, args
         "train_return_last": curve[-1][1],
         "curve": curve,
         "asor_last": stats,
-        "settings": {k: getattr(args, k) for k in ("steps", "learning_starts", "utd", "iter_steps")},
+        "settings": {
+            k: getattr(args, k) for k in ("steps", "learning_starts", "utd", "iter_steps")
+        },
     }
 
 
@@ -195,8 +214,12 @@ def _order(method: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--tasks", nargs="+", default=["Hopper"], help="Hopper, Walker2d, HalfCheetah, Ant")
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument(
+        "--tasks", nargs="+", default=["Hopper"], help="Hopper, Walker2d, HalfCheetah, Ant"
+    )
     p.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--first-seed", type=int, default=0)
@@ -217,8 +240,13 @@ def main(argv: list[str] | None = None) -> None:
 
         torch.set_num_threads(1)
         os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
-        ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False,
-                 configure_logging=False)
+        ray.init(
+            address="local",
+            num_cpus=2,
+            include_dashboard=False,
+            log_to_driver=False,
+            configure_logging=False,
+        )
         (out / "runs").mkdir(parents=True, exist_ok=True)
         # seed-major order: every method gets seed s before any method gets seed s+1
         for seed in range(args.first_seed, args.first_seed + args.seeds):

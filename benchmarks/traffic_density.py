@@ -24,8 +24,14 @@ import numpy as np
 
 METHODS = {
     "ppo": None,
-    "asor": {"mode": "asor", "proxy": "rnd", "rho_value": 0.5, "rho_count": 0.5,
-             "lambda_": 0.01, "reward_form": "log"},
+    "asor": {
+        "mode": "asor",
+        "proxy": "rnd",
+        "rho_value": 0.5,
+        "rho_count": 0.5,
+        "lambda_": 0.01,
+        "reward_form": "log",
+    },
 }
 ENV_CONFIG = {"densities": [0.5, 1.0, 1.5, 2.0], "base_vehicles_count": 10}
 
@@ -40,8 +46,15 @@ def ppo_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
         PPOConfig()
         .environment("rllib_asor/HighwayDensity-v0", env_config=ENV_CONFIG)
         .env_runners(num_env_runners=0, num_envs_per_env_runner=1)
-        .training(gamma=0.8, lambda_=0.95, lr=5e-4, entropy_coeff=0.0,
-                  train_batch_size=args.batch, minibatch_size=64, num_epochs=10)
+        .training(
+            gamma=0.8,
+            lambda_=0.95,
+            lr=5e-4,
+            entropy_coeff=0.0,
+            train_batch_size=args.batch,
+            minibatch_size=64,
+            num_epochs=10,
+        )
         .rl_module(model_config={"fcnet_hiddens": [256, 256]})
         .debugging(seed=seed)
     )
@@ -76,8 +89,11 @@ def evaluate(module: Any, densities: list[float], episodes: int) -> dict[str, di
             rets.append(ret)
             crashes.append(float(bool(info.get("crashed", False))))
         env.close()
-        out[str(d)] = {"return": float(np.mean(rets)), "crash_rate": float(np.mean(crashes)),
-                       "speed": float(np.nanmean(speeds))}
+        out[str(d)] = {
+            "return": float(np.mean(rets)),
+            "crash_rate": float(np.mean(crashes)),
+            "speed": float(np.nanmean(speeds)),
+        }
     return out
 
 
@@ -91,16 +107,23 @@ def run_one(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
             steps = result["num_env_steps_sampled_lifetime"]
             ret = result["env_runners"].get("episode_return_mean", float("nan"))
             curve.append([int(steps), float(ret)])
-            print(f"  {method} seed={seed} steps={steps} return={ret:.2f} t={time.time() - t0:.0f}s",
-                  flush=True)
+            print(
+                f"  {method} seed={seed} steps={steps} return={ret:.2f} t={time.time() - t0:.0f}s",
+                flush=True,
+            )
         wall = time.time() - t0
         ev = evaluate(algo.get_module(), args.eval_densities, args.eval_episodes)
     finally:
         algo.stop()
     return {
-        "method": method, "seed": seed, "steps": curve[-1][0], "wall_s": wall, "eval": ev,
+        "method": method,
+        "seed": seed,
+        "steps": curve[-1][0],
+        "wall_s": wall,
+        "eval": ev,
         "eval_return_mean": float(np.mean([v["return"] for v in ev.values()])),
-        "train_return_last": curve[-1][1], "curve": curve,
+        "train_return_last": curve[-1][1],
+        "curve": curve,
         "asor_last": {k: float(v) for k, v in result.get("asor", {}).items() if np.isscalar(v)},
         "settings": {"steps": args.steps, "batch": args.batch, "eval_episodes": args.eval_episodes},
     }
@@ -120,12 +143,19 @@ def summarize(out: Path, densities: list[float]) -> str:
         rs = [r for r in runs if r["method"] == method]
         if not rs:
             continue
-        per = {d: ([r["eval"][d]["return"] for r in rs], [r["eval"][d]["crash_rate"] for r in rs])
-               for d in ds if all(d in r["eval"] for r in rs)}
-        table[method] = {"seeds": [r["seed"] for r in rs],
-                         "eval": {d: {"return": float(np.mean(a)), "crash_rate": float(np.mean(b))}
-                                  for d, (a, b) in per.items()},
-                         "asor_last": [r["asor_last"] for r in rs]}
+        per = {
+            d: ([r["eval"][d]["return"] for r in rs], [r["eval"][d]["crash_rate"] for r in rs])
+            for d in ds
+            if all(d in r["eval"] for r in rs)
+        }
+        table[method] = {
+            "seeds": [r["seed"] for r in rs],
+            "eval": {
+                d: {"return": float(np.mean(a)), "crash_rate": float(np.mean(b))}
+                for d, (a, b) in per.items()
+            },
+            "asor_last": [r["asor_last"] for r in rs],
+        }
         lines.append(
             f"| {method} | {len(rs)} | {int(np.mean([r['steps'] for r in rs]))} | "
             + " | ".join(f"{np.mean(per[d][0]):.2f} / {np.mean(per[d][1]):.2f}" for d in per)
@@ -139,7 +169,9 @@ def summarize(out: Path, densities: list[float]) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     p.add_argument("--seeds", type=int, default=1)
     p.add_argument("--steps", type=int, default=1500, help="env steps per run (equal for all)")
@@ -156,8 +188,13 @@ def main(argv: list[str] | None = None) -> None:
 
         torch.set_num_threads(1)
         os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
-        ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False,
-                 configure_logging=False)
+        ray.init(
+            address="local",
+            num_cpus=2,
+            include_dashboard=False,
+            log_to_driver=False,
+            configure_logging=False,
+        )
         (out / "runs").mkdir(parents=True, exist_ok=True)
         for seed in range(args.seeds):
             for method in args.methods:

@@ -21,10 +21,16 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.mujoco_shift import deterministic_action, sac_config, train
+from benchmarks.mujoco_shift import deterministic_action, train
 
-ASOR = {"mode": "asor", "proxy": "rnd", "rho_value": 0.5, "rho_count": 0.5, "lambda_": 0.05,
-        "reward_form": "log"}
+ASOR = {
+    "mode": "asor",
+    "proxy": "rnd",
+    "rho_value": 0.5,
+    "rho_count": 0.5,
+    "lambda_": 0.05,
+    "reward_form": "log",
+}
 
 
 def rollouts(algo, episodes: int, explore: bool, seed: int = 3000) -> list[dict]:
@@ -47,9 +53,12 @@ def rollouts(algo, episodes: int, explore: bool, seed: int = 3000) -> list[dict]
             states.append(np.asarray(obs, dtype=np.float32))
             if explore:
                 with torch.no_grad():
-                    out = module.forward_exploration({Columns.OBS: torch.as_tensor(states[-1])[None]})
+                    out = module.forward_exploration(
+                        {Columns.OBS: torch.as_tensor(states[-1])[None]}
+                    )
                     dist = module.get_exploration_action_dist_cls().from_logits(
-                        out[Columns.ACTION_DIST_INPUTS])
+                        out[Columns.ACTION_DIST_INPUTS]
+                    )
                     action = dist.sample()[0].numpy()
             else:
                 action = deterministic_action(module, obs)
@@ -71,19 +80,27 @@ def drop_stats(eps: list[dict], lam: float, window: int) -> dict:
         r, b = np.array(e["rewards"]), lam * np.array(e["log_omega"])
         if not e["fell"] or len(r) < 2 * window:
             continue
-        rows.append({
-            "length": len(r),
-            "bonus_before": float(b[:-window].mean()), "bonus_last": float(b[-window:].mean()),
-            "env_before": float(r[:-window].mean()), "env_last": float(r[-window:].mean()),
-        })
+        rows.append(
+            {
+                "length": len(r),
+                "bonus_before": float(b[:-window].mean()),
+                "bonus_last": float(b[-window:].mean()),
+                "env_before": float(r[:-window].mean()),
+                "env_last": float(r[-window:].mean()),
+            }
+        )
     if not rows:
         return {"episodes": 0}
     d_bonus = np.array([x["bonus_last"] - x["bonus_before"] for x in rows])
     d_env = np.array([x["env_last"] - x["env_before"] for x in rows])
     return {
-        "episodes": len(rows), "window": window, "per_episode": rows,
-        "bonus_drop_mean": float(d_bonus.mean()), "bonus_dropped_in": int((d_bonus < 0).sum()),
-        "env_drop_mean": float(d_env.mean()), "env_dropped_in": int((d_env < 0).sum()),
+        "episodes": len(rows),
+        "window": window,
+        "per_episode": rows,
+        "bonus_drop_mean": float(d_bonus.mean()),
+        "bonus_dropped_in": int((d_bonus < 0).sum()),
+        "env_drop_mean": float(d_env.mean()),
+        "env_dropped_in": int((d_env < 0).sum()),
     }
 
 
@@ -102,8 +119,9 @@ def plot(ep: dict, lam: float, window: int, png: Path) -> None:
     ax1.axvspan(len(r) - window, len(r) - 1, color="grey", alpha=0.2, label=f"last {window} steps")
     ax1.set_ylabel("reward")
     ax1.legend(fontsize=7, loc="lower left")
-    ax1.set_title(f"Walker2d (original dynamics), one episode ending in a fall at step {len(r)}",
-                  fontsize=9)
+    ax1.set_title(
+        f"Walker2d (original dynamics), one episode ending in a fall at step {len(r)}", fontsize=9
+    )
     ax2.plot(t, b, color="tab:red")
     ax2.axvspan(len(r) - window, len(r) - 1, color="grey", alpha=0.2)
     ax2.set_ylabel(f"λ·log ω(s)  (λ={lam})", fontsize=8)
@@ -114,7 +132,9 @@ def plot(ep: dict, lam: float, window: int, png: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--steps", type=int, default=4000)
     p.add_argument("--learning-starts", type=int, default=1000)
     p.add_argument("--utd", type=float, default=0.25)
@@ -131,8 +151,13 @@ def main(argv: list[str] | None = None) -> None:
 
     torch.set_num_threads(1)
     os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
-    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False,
-             configure_logging=False)
+    ray.init(
+        address="local",
+        num_cpus=2,
+        include_dashboard=False,
+        log_to_driver=False,
+        configure_logging=False,
+    )
     algo, curve, stats, wall = train("Walker2d", args.seed, ASOR, args)
     try:
         eps = rollouts(algo, args.episodes, args.explore)
@@ -148,8 +173,16 @@ def main(argv: list[str] | None = None) -> None:
         plot(max(falling, key=lambda e: len(e["rewards"])), lam, args.window, Path(args.png))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    res = {"train_steps": curve[-1][0], "train_wall_s": wall, "curve": curve, "asor_last": stats,
-           "lambda_": lam, "drop": stats_drop, "episodes": eps, "png": args.png if falling else None}
+    res = {
+        "train_steps": curve[-1][0],
+        "train_wall_s": wall,
+        "curve": curve,
+        "asor_last": stats,
+        "lambda_": lam,
+        "drop": stats_drop,
+        "episodes": eps,
+        "png": args.png if falling else None,
+    }
     (out / "result.json").write_text(json.dumps(res))
     print(json.dumps({k: v for k, v in res.items() if k not in ("episodes", "curve")}, indent=1))
 

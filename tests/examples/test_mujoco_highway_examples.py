@@ -1,0 +1,124 @@
+"""Tuned examples for the online cross-dynamics families (issue 5): MuJoCo shift (SAC) and
+traffic density (PPO).
+
+Every file is loaded and validated by the CLI's own pre-Ray path (`experiment.load_file` +
+`experiment.validate`: keys, asor block, env built with its env_config, RLlib's validate());
+one SAC+ASOR and one PPO+ASOR file are trained for real with `rllib train file X --test`
+in-process, and their last result must carry the `asor/...` statistics.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import pytest
+
+from rllib_asor.cli import experiment as E
+from rllib_asor.cli.main import main
+
+REPO = Path(__file__).resolve().parents[2]
+MUJOCO = sorted((REPO / "tuned_examples/mujoco").glob("*.yaml"))
+HIGHWAY = sorted((REPO / "tuned_examples/highway").glob("*.yaml"))
+
+
+def _run(argv: list[str]) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = main(argv)
+    return rc, out.getvalue(), err.getvalue()
+
+
+def _last_result(experiment_dir: Path) -> tuple[Path, dict]:
+    [trial] = [p for p in experiment_dir.iterdir() if p.is_dir()]
+    lines = (trial / "result.json").read_text().strip().splitlines()
+    return trial, json.loads(lines[-1])
+
+
+def test_all_eight_examples_exist():
+    names = {p.name for p in MUJOCO + HIGHWAY}
+    assert names == {
+        f"{m}-{e}.yaml" for m in ("sac", "sac-srpo", "sac-asor") for e in ("hopper", "walker2d")
+    } | {"ppo.yaml", "ppo-asor.yaml"}
+
+
+@pytest.mark.parametrize("path", MUJOCO + HIGHWAY, ids=lambda p: f"{p.parent.name}/{p.stem}")
+def test_example_validates_without_training(path):
+    [exp] = E.load_file(str(path))
+    cfg = E.validate(exp)  # raises UsageError on any bad key/value/env_config
+    assert exp.warnings == []  # no legacy keys in our own examples
+    assert "num_env_steps_sampled_lifetime" in exp.stop
+    stem = path.stem
+    if path.parent.name == "mujoco":
+        assert exp.run == "SAC" and cfg.twin_q and cfg.train_batch_size_per_learner == 256
+        assert cfg.env.endswith(("HopperShift-v0", "Walker2dShift-v0"))
+        assert cfg.env_config["params"] == ["mass", "damping", "wind"]
+    else:
+        assert exp.run == "PPO" and cfg.env == "rllib_asor/HighwayDensity-v0"
+    mode = {"asor": "asor", "srpo": "srpo"}.get(stem.split("-")[1] if "-" in stem else "", None)
+    if mode is None:
+        assert exp.asor is None
+    else:
+        assert exp.asor["mode"] == mode and exp.asor["reward_form"] == "log"
+
+
+def _patched(tmp_path: Path, name: str, replace: dict[str, str]) -> Path:
+    """A copy of tuned_examples/NAME with exact text replacements (each must match once)."""
+    text = (REPO / "tuned_examples" / name).read_text()
+    for old, new in replace.items():
+        assert text.count(old) == 1, old
+        text = text.replace(old, new)
+    path = tmp_path / Path(name).name
+    path.write_text(text)
+    return path
+
+
+def _assert_asor_metrics(result: dict) -> None:
+    asor = result["asor"]
+    assert 0.0 <= asor["disc_acc"] <= 1.0
+    assert asor["real_fraction"] == pytest.approx(0.25, abs=0.03)  # ρ1·ρ2 = 0.25
+    assert asor["aug_reward_max"] <= 0.0  # log form: λ·log ω ≤ 0
+
+
+def test_sac_asor_hopper_test_run_reports_asor_metrics(tmp_path, ray_session):
+    # --test stops after 2 iterations; the file waits 5000 steps before learning, so this copy
+    # starts learning after 100 steps (iterations of 80 steps) to reach ASOR updates quickly.
+    path = _patched(
+        tmp_path,
+        "mujoco/sac-asor-hopper.yaml",
+        {
+            "num_steps_sampled_before_learning_starts: 5000": (
+                "num_steps_sampled_before_learning_starts: 100"
+            ),
+            "min_sample_timesteps_per_iteration: 1000": "min_sample_timesteps_per_iteration: 80",
+        },
+    )
+    rc, out, err = _run(
+        ["train", "file", str(path), "--test", "--storage-path", str(tmp_path / "res")]
+    )
+    assert rc == 0, err[-3000:]
+    trial, result = _last_result(tmp_path / "res/hopper-sac-asor")
+    assert trial.name.startswith("AsorSAC_")
+    assert result["training_iteration"] == 2
+    _assert_asor_metrics(result)
+    assert json.loads((trial / "params.json").read_text())["asor"]["lambda_"] == 0.05
+
+
+def test_highway_ppo_asor_test_run_reports_asor_metrics(tmp_path, ray_session):
+    # Fewer cars (2-6 instead of 5-20) keep highway-env's O(N²) step cheap; wiring unchanged.
+    path = _patched(
+        tmp_path,
+        "highway/ppo-asor.yaml",
+        {"base_vehicles_count: 10": "base_vehicles_count: 3"},
+    )
+    rc, out, err = _run(
+        ["train", "file", str(path), "--test", "--storage-path", str(tmp_path / "res")]
+    )
+    assert rc == 0, err[-3000:]
+    trial, result = _last_result(tmp_path / "res/highway-ppo-asor")
+    assert trial.name.startswith("AsorPPO_")
+    assert result["training_iteration"] == 2
+    assert result["num_env_steps_sampled_lifetime"] >= 512
+    _assert_asor_metrics(result)
