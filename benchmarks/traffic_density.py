@@ -186,6 +186,8 @@ def main(argv: list[str] | None = None) -> None:
         import ray
         import torch
 
+        import rllib_asor.envs  # noqa: F401  (registers the env ids for the local env runner)
+
         torch.set_num_threads(1)
         os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
         ray.init(
