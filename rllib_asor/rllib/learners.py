@@ -186,10 +186,24 @@ class AsorSACTorchLearner(_SoftQAsorMixin, SACTorchLearner):
 class AsorCQLTorchLearner(_SoftQAsorMixin, CQLTorchLearner):
     """CQL (offline) with ASOR. Offline batches come through Ray Data's `OfflinePreLearner`,
     where connector pieces added in `build()` never run, so the ASOR piece is applied to each
-    batch in `_update`, before the losses."""
+    batch in `_update`, before the losses.
+
+    Offline runs sample no env steps, so a λ schedule's timestep is the number of dataset rows
+    this Learner has trained on (counted here; not checkpointed: it restarts at 0 on restore).
+    """
 
     asor_in_pipeline = False
 
+    def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
+        super().before_gradient_based_update(timesteps=timesteps)
+        self._asor_timestep = float(getattr(self, "_asor_offline_rows", 0))
+
     def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
+        self._asor_timestep = float(getattr(self, "_asor_offline_rows", 0))
         self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)
-        return super()._update(batch, **kwargs)
+        out = super()._update(batch, **kwargs)
+        self._asor_offline_rows = getattr(self, "_asor_offline_rows", 0) + max(
+            (len(batch[pid][Columns.REWARDS]) for pid in self._asor_piece.aux_ids if pid in batch),
+            default=0,
+        )
+        return out

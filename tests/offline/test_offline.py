@@ -112,10 +112,12 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
     )
     # dataset_num_iters_per_learner=1 with num_learners=0 trips RLlib 2.60 (docs/offline.md).
     offline.offline_input(config, dataset, dataset_num_iters_per_learner=2)
-    algo = rllib_asor.with_asor(config, lambda_=0.1, seed=0).build_algo()
+    # A λ schedule over dataset rows trained: 0 for the first minibatch (row 0), 0.1 from row 64.
+    algo = rllib_asor.with_asor(config, lambda_=[[0, 0.0], [64, 0.1]], seed=0).build_algo()
     try:
         result = algo.train()
         asor = result["asor"]
+        assert asor["lambda"] == pytest.approx(0.1)  # the second minibatch's
         assert asor["real_fraction"] == pytest.approx(0.25, abs=0.02)
         assert asor["aug_reward_mean"] < 0 and asor["aug_reward_max"] <= 0
         assert np.isfinite(asor["disc_loss"]) and np.isfinite(asor["rnd_loss"])
