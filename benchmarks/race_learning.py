@@ -49,7 +49,11 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
     from rllib_asor.rllib.race import RACE_ASOR_OBS_KEYS, race_ppo_config
 
     config = (
-        race_ppo_config(num_racers=1, map_id=None, max_episode_steps=args.max_episode_steps)
+        race_ppo_config(
+            num_racers=1,
+            map_id=getattr(args, "train_map", None),
+            max_episode_steps=args.max_episode_steps,
+        )
         .env_runners(num_env_runners=0, num_envs_per_env_runner=args.envs)
         .training(
             lr=[[0, 1e-3], [args.steps, 3e-4]],
@@ -271,6 +275,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--epochs", type=int, default=4)
     parser.add_argument("--envs", type=int, default=8, help="vectorised envs (local sampling)")
     parser.add_argument("--max-episode-steps", type=int, default=1000)
+    parser.add_argument(
+        "--train-map",
+        type=int,
+        default=None,
+        help="train on this one map (0..9) instead of a random map per episode; "
+        "evaluation is always on all ten",
+    )
     parser.add_argument("--eval-episodes", type=int, default=1, help="episodes per map")
     parser.add_argument("--greedy", action="store_true", help="evaluate the argmax policy")
     parser.add_argument("--parallel", type=int, default=3, help="trials at once (1 CPU each)")
@@ -291,7 +302,16 @@ def main(argv: list[str] | None = None) -> int:
         ray.init(
             address="local", num_cpus=args.parallel, include_dashboard=False, log_to_driver=False
         )
-        keys = ("steps", "batch", "epochs", "envs", "max_episode_steps", "eval_episodes", "greedy")
+        keys = (
+            "steps",
+            "batch",
+            "epochs",
+            "envs",
+            "max_episode_steps",
+            "eval_episodes",
+            "greedy",
+            "train_map",
+        )
         shared = {k: v for k, v in vars(args).items() if k in keys}
         specs = [
             {"method": n, "asor": a, "seed": s, "args": shared, "out": str(out)}
