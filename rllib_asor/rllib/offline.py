@@ -27,6 +27,7 @@ import argparse
 import copy
 import datetime as _dt
 import json
+import logging
 import math
 import os
 import re
@@ -600,6 +601,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     e.add_argument("--data", required=True, help="the task dir, e.g. data/offline/hopper")
     e.add_argument("--episodes", type=int, default=5)
     args = p.parse_args(argv)
+    logging.getLogger("ray.data").setLevel(logging.WARNING)  # one progress log per write
     try:
         if args.cmd == "collect":
             collect(
