@@ -594,6 +594,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--overwrite", action="store_true", help="replace an existing task dir")
+    c.add_argument(
+        "--torch-threads", type=int, default=1, help="torch intra-op threads (default 1)"
+    )
     i = sub.add_parser("info", help="validate a dataset and print its return statistics")
     i.add_argument("path")
     e = sub.add_parser("evaluate", help="normalised scores of a checkpoint under each dynamics")
@@ -604,6 +607,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.getLogger("ray.data").setLevel(logging.WARNING)  # one progress log per write
     try:
         if args.cmd == "collect":
+            import torch
+
+            # Measured on 2 shared cores: OpenMP threads spinning under load made SAC ~10x slower.
+            torch.set_num_threads(args.torch_threads)
             collect(
                 args.env, args.out, args.steps, dynamics=args.dynamics, qualities=args.qualities,
                 sac_steps=args.sac_steps, seed=args.seed, overwrite=args.overwrite,
