@@ -148,3 +148,9 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
         assert batch["asor_disc.default_policy"]["asor_label"].sum() > 0
     finally:
         algo.stop()
+
+
+def test_cli_info_on_a_bad_path_exits_2_with_one_line_error(tmp_path, capsys):
+    assert offline.main(["info", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: no manifest.json in") and "\n" not in err
