@@ -273,6 +273,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
     parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--steps", type=int, default=100_000)
     parser.add_argument("--lr", type=float, default=5e-4)
     parser.add_argument("--entropy", type=float, default=0.01)
@@ -294,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
         shared = {k: v for k, v in vars(args).items() if k in ("steps", "lr", "entropy")}
         specs = [
             {"method": n, "asor": a, "seed": s, "args": shared, "out": str(out)}
-            for s in range(args.seeds)
+            for s in range(args.first_seed, args.first_seed + args.seeds)
             for n, a in methods
             if not (out / "runs" / f"{n}-{s}.json").exists()
         ]

@@ -111,6 +111,16 @@ def load_file(path: str) -> list[Experiment]:
     return [parse_experiment(str(name), spec, path) for name, spec in data.items()]
 
 
+def _absolute_input(value: Any) -> Any:
+    """Offline `input` paths made absolute against the launch directory: Tune runs each trial
+    in its own directory, where a relative `data/offline/...` would not be found."""
+    if isinstance(value, list):
+        return [_absolute_input(v) for v in value]
+    if isinstance(value, str) and value != "sampler" and "://" not in value:
+        return os.path.abspath(value)
+    return value
+
+
 def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     """Translate one `name: {...}` entry (legacy keys renamed with a warning)."""
     if not isinstance(spec, dict):
@@ -151,6 +161,8 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
         asor = _mapping(asor, source, f"{name}.config.asor")
     config, more = legacy.translate_config(config, source, f"{name}.config.")
     warns += more
+    if "input" in config:
+        config["input"] = _absolute_input(config["input"])
     stop, more = legacy.translate_stop(
         _mapping(spec.get("stop") or {}, source, f"{name}.stop"), source, f"{name}.stop."
     )
