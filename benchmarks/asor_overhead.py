@@ -70,10 +70,9 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     ray.init(address="local", num_cpus=4, include_dashboard=False, log_to_driver=False)
-    if args.env.startswith("game_env/"):
-        from rllib_asor.rllib.race import register_race_envs
+    from rllib_asor.rllib.envs import register_with_tune
 
-        register_race_envs()
+    register_with_tune(args.env)  # remote env runners build our ids through Tune's registry
     algos = {"PPO": build(args.env, False, args), "PPO+ASOR": build(args.env, True, args)}
     rates: dict[str, list[float]] = {k: [] for k in algos}
     for i in range(args.iters):

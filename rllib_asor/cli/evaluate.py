@@ -102,8 +102,8 @@ def evaluate(
     """Restore the algorithm at `path` and run `episodes` episodes; return the statistics."""
     from ray.rllib.algorithms.algorithm import Algorithm
 
-    from rllib_asor.cli import envs
     from rllib_asor.cli.cluster import start_ray
+    from rllib_asor.rllib import envs
 
     config = _local_config(path, seed)
     env_id = config.get("env")

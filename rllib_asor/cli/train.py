@@ -138,8 +138,8 @@ def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> i
     """Run one experiment with Tune; return the number of errored trials."""
     from ray import tune
 
-    from rllib_asor.cli import envs
     from rllib_asor.cli.progress import ProgressReporter
+    from rllib_asor.rllib import envs
 
     envs.register_with_tune(exp.env)
     trainable = _trainable(exp)

@@ -21,6 +21,7 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.rllib.callbacks import AsorMetricsCallback
+from rllib_asor.rllib.envs import register_with_tune
 from rllib_asor.rllib.learners import (
     AsorCQLTorchLearner,
     AsorPPOTorchLearner,
@@ -71,6 +72,8 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
         raise ValueError(f"ASOR needs framework='torch', got {config.framework_str!r}")
 
     config = config.copy(copy_frozen=False)
+    if isinstance(config.env, str):
+        register_with_tune(config.env)  # remote env runners can then build our env ids
     asor_dict = asor.to_dict()
     config.rl_module(rl_module_spec=_module_spec(config, asor))
     config.learners(

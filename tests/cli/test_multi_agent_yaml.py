@@ -10,9 +10,10 @@ import pickle
 
 import pytest
 
-from rllib_asor.cli import envs, multi_agent
 from rllib_asor.cli import experiment as E
+from rllib_asor.cli import multi_agent
 from rllib_asor.cli.errors import UsageError
+from rllib_asor.rllib import envs
 
 MULTI = """
 x:

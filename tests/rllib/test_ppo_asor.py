@@ -178,3 +178,15 @@ def test_aux_modules_get_aux_epochs_passes_while_policy_gets_num_epochs(algo):
     # num_epochs=2 for the policy, aux_epochs=1 (default) for the discriminator and RND.
     assert steps[DISC] == steps[PROXY]
     assert 0.35 * steps[DEFAULT_MODULE_ID] <= steps[DISC] <= 0.65 * steps[DEFAULT_MODULE_ID]
+
+
+def test_with_asor_makes_our_env_ids_buildable_on_remote_env_runners(ray_session):
+    from ray.tune.registry import ENV_CREATOR, _global_registry
+
+    config = lava_ppo().env_runners(num_env_runners=1, num_cpus_per_env_runner=0.5)
+    assert _global_registry.contains(ENV_CREATOR, "rllib_asor/LavaWorld-v0")
+    algo = config.build_algo()
+    try:
+        assert algo.train()["env_runners"]["num_env_steps_sampled"] > 0
+    finally:
+        algo.stop()

@@ -1,4 +1,5 @@
-"""Env ids: import the modules that register ours, check an id exists, register it with Tune."""
+"""Our env ids for RLlib: import the modules that register them, check an id exists, and
+register it with Tune so remote env runners (which never import our packages) can build it."""
 
 from __future__ import annotations
 
