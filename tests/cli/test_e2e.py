@@ -140,7 +140,7 @@ def test_asor_lava_example_test_run_reports_asor_metrics(tmp_path, cli_ray):
     params = json.loads((trial / "params.json").read_text())  # the trial's resolved param space
     assert params["asor"] == {
         "mode": "asor",
-        "lambda_": 0.01,
+        "lambda_": 0.002,
         "rho_value": 0.5,
         "rho_count": 0.5,
         "proxy": "rnd",
