@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from benchmarks.common import start_local_ray
 
 
 def build(env: str, asor: bool, args: argparse.Namespace) -> Any:
@@ -62,14 +63,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="benchmarks/out/overhead")
     args = parser.parse_args(argv)
 
-    import ray
-    import torch
 
     import rllib_asor.envs  # noqa: F401
 
-    torch.set_num_threads(1)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    ray.init(address="local", num_cpus=4, include_dashboard=False, log_to_driver=False)
+    start_local_ray(4)
     from rllib_asor.rllib.envs import register_with_tune
 
     register_with_tune(args.env)  # remote env runners build our ids through Tune's registry

@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.common import bootstrap_ci, start_local_ray
+
 DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
 
 
@@ -171,16 +173,6 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
     return final
 
 
-def bootstrap_ci(x: np.ndarray) -> tuple[float, float]:
-    """95% bootstrap confidence interval of the mean (scipy)."""
-    from scipy.stats import bootstrap
-
-    if len(x) < 2 or np.allclose(x, x[0]):
-        return float(x.mean()), float(x.mean())
-    res = bootstrap((x,), np.mean, confidence_level=0.95, n_resamples=5000, random_state=0)
-    return float(res.confidence_interval.low), float(res.confidence_interval.high)
-
-
 def summarize(out: Path, methods: list[str]) -> str:
     """Markdown table + PNGs from the per-run JSON files."""
     from rllib_asor.envs.lava import LAVA_ROWS, optimal_return
@@ -285,13 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     methods = [parse_method(m) for m in args.methods]
     names = [n for n, _ in methods]
     if not args.summarize_only:
-        import ray
         from ray import tune
 
-        os.environ.setdefault("OMP_NUM_THREADS", "1")
-        ray.init(
-            address="local", num_cpus=args.parallel, include_dashboard=False, log_to_driver=False
-        )
+        start_local_ray(args.parallel)
         shared = {k: v for k, v in vars(args).items() if k in ("steps", "lr", "entropy")}
         specs = [
             {"method": n, "asor": a, "seed": s, "args": shared, "out": str(out)}

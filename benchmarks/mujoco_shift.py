@@ -29,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.common import start_local_ray
+
 DEFAULT_METHODS = ("sac", "srpo:mode=srpo", "asor:mode=asor")
 EVAL_DYNAMICS = ("original", "body_mass", "density_10")
 ASOR_BASE = {
@@ -234,19 +236,10 @@ def main(argv: list[str] | None = None) -> None:
     out = Path(args.out)
     if not args.summarize_only:
         import ray
-        import torch
 
         import rllib_asor.envs  # noqa: F401
 
-        torch.set_num_threads(1)
-        os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
-        ray.init(
-            address="local",
-            num_cpus=2,
-            include_dashboard=False,
-            log_to_driver=False,
-            configure_logging=False,
-        )
+        start_local_ray(2)
         (out / "runs").mkdir(parents=True, exist_ok=True)
         # seed-major order: every method gets seed s before any method gets seed s+1
         for seed in range(args.first_seed, args.first_seed + args.seeds):

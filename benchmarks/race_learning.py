@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.common import start_local_ray
 from benchmarks.lava_reproduction import parse_method
 
 DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
@@ -292,16 +293,13 @@ def main(argv: list[str] | None = None) -> int:
     methods = [parse_method(m) for m in args.methods]
     names = [n for n, _ in methods]
     if not args.summarize_only:
-        import ray
         from ray import tune
 
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         t0 = time.time()
         reference_rows(out, args)
         print(f"reference rows in {time.time() - t0:.0f} s", flush=True)
-        ray.init(
-            address="local", num_cpus=args.parallel, include_dashboard=False, log_to_driver=False
-        )
+        start_local_ray(args.parallel)
         keys = (
             "steps",
             "batch",

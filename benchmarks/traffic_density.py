@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.common import start_local_ray
+
 METHODS = {
     "ppo": None,
     "asor": {
@@ -184,19 +186,10 @@ def main(argv: list[str] | None = None) -> None:
     out = Path(args.out)
     if not args.summarize_only:
         import ray
-        import torch
 
         import rllib_asor.envs  # noqa: F401  (registers the env ids for the local env runner)
 
-        torch.set_num_threads(1)
-        os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
-        ray.init(
-            address="local",
-            num_cpus=2,
-            include_dashboard=False,
-            log_to_driver=False,
-            configure_logging=False,
-        )
+        start_local_ray(2)
         (out / "runs").mkdir(parents=True, exist_ok=True)
         for seed in range(args.seeds):
             for method in args.methods:

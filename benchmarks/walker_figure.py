@@ -16,11 +16,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks.common import start_local_ray
 from benchmarks.mujoco_shift import deterministic_action, train
 
 ASOR = {
@@ -147,19 +147,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--png", default="docs/walker_augmented_reward.png")
     args = p.parse_args(argv)
     import ray
-    import torch
 
     import rllib_asor.envs  # noqa: F401  (registers the env ids for the local env runner)
 
-    torch.set_num_threads(1)
-    os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
-    ray.init(
-        address="local",
-        num_cpus=2,
-        include_dashboard=False,
-        log_to_driver=False,
-        configure_logging=False,
-    )
+    start_local_ray(2)
     algo, curve, stats, wall = train("Walker2d", args.seed, ASOR, args)
     try:
         eps = rollouts(algo, args.episodes, args.explore)

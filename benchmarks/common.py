@@ -1,0 +1,39 @@
+"""What every benchmark needs: a quiet local Ray on a small machine, and a bootstrap CI."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+
+def start_local_ray(num_cpus: int = 2) -> None:
+    """A fresh local Ray (ignores any `ray start` cluster), one torch thread per process.
+
+    On 2 cores torch's intra-op threads fight the env runners: one thread is several times
+    faster under load (docs/race_training.md).
+    """
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
+    import ray
+    import torch
+
+    torch.set_num_threads(1)
+    ray.init(
+        address="local",
+        num_cpus=num_cpus,
+        include_dashboard=False,
+        log_to_driver=False,
+        configure_logging=False,
+    )
+
+
+def bootstrap_ci(x: np.ndarray) -> tuple[float, float]:
+    """95% bootstrap confidence interval of the mean (scipy); degenerate for n < 2."""
+    from scipy.stats import bootstrap
+
+    x = np.asarray(x, dtype=float)
+    if len(x) < 2 or np.allclose(x, x[0]):
+        return float(x.mean()), float(x.mean())
+    res = bootstrap((x,), np.mean, confidence_level=0.95, n_resamples=5000, random_state=0)
+    return float(res.confidence_interval.low), float(res.confidence_interval.high)
