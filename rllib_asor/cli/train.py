@@ -135,7 +135,7 @@ def _check_resumable(path: str) -> None:
 
 
 def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> int:
-    """Run one experiment with Tune; return the number of errored trials."""
+    """Run one experiment with Tune; return the number of errored or unfinished trials."""
     from ray import tune
 
     from rllib_asor.cli.progress import ProgressReporter
@@ -175,7 +175,14 @@ def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> i
         )
     results = tuner.fit()
     _print_summary(exp, results)
-    return len(results.errors)
+    unfinished = [r for r in results if not r.error and not (r.metrics or {}).get("done")]
+    if unfinished:
+        print(
+            f"rllib: {exp.name}: {len(unfinished)} trial(s) stopped before their stop criteria "
+            "(interrupted?); continue with --resume",
+            file=sys.stderr,
+        )
+    return len(results.errors) + len(unfinished)
 
 
 def _print_summary(exp: E.Experiment, results: Any) -> None:
@@ -185,7 +192,7 @@ def _print_summary(exp: E.Experiment, results: Any) -> None:
         ret = (m.get("env_runners") or {}).get("episode_return_mean")
         steps = m.get("num_env_steps_sampled_lifetime")
         ckpt = result.checkpoint.path if result.checkpoint else None
-        status = "ERROR" if result.error else "OK"
+        status = "ERROR" if result.error else "OK" if m.get("done") else "STOPPED"
         ret_s = f"{ret:.2f}" if isinstance(ret, int | float) else "n/a"
         print(
             f"  {status} iter={m.get('training_iteration')} env_steps={steps} "
