@@ -6,25 +6,22 @@ import warnings
 from typing import Any
 
 import gymnasium as gym
-import mujoco
 import numpy as np
 
+from game_env.base import RaceSimEnvMixin
 from game_env.constants import FRAME_SKIP
-from game_env.maps import NUM_MAPS
 from game_env.options import (
-    COURSE_SEEDS,
     check_action,
     check_course_seed,
     check_map_choice,
     check_positive_int,
     check_render_mode,
-    check_reset_options,
 )
 from game_env.sim import RaceSim
 from game_env.spaces import REWARD_TERMS, action_space, observation_space
 
 
-class ObstacleRaceEnv(gym.Env):
+class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
     """Single-racer obstacle race (see ``game_env.spaces`` for spaces, RACE.md for rules).
 
     Args:
@@ -65,21 +62,6 @@ class ObstacleRaceEnv(gym.Env):
         self._done = False
 
     @property
-    def model(self) -> mujoco.MjModel:
-        """The MuJoCo model of the current course."""
-        return self.sim.model
-
-    @property
-    def data(self) -> mujoco.MjData:
-        """The MuJoCo data of the current episode."""
-        return self.sim.data
-
-    @property
-    def dt(self) -> float:
-        """Seconds of race time per env step (timestep x frame_skip)."""
-        return self.sim.model.opt.timestep * self.frame_skip
-
-    @property
     def map_id(self) -> int:
         """The map of the current episode."""
         return self.sim.map_id
@@ -89,20 +71,9 @@ class ObstacleRaceEnv(gym.Env):
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Start an episode; ``options`` may fix ``map_id`` and/or ``course_seed`` for it."""
         super().reset(seed=seed)
-        opts = check_reset_options(options)
-        map_id = opts.get("map_id", self._map_choice)
-        if map_id is None:
-            map_id = int(self.np_random.integers(NUM_MAPS))
-        cseed = opts.get("course_seed", self._course_seed)
-        if cseed is None:
-            cseed = int(self.np_random.integers(COURSE_SEEDS))
+        map_id, cseed = self._load_course(self.np_random, options)
         limit = self.spec.max_episode_steps if self.spec is not None and self.spec.max_episode_steps else None
         self.sim.max_episode_steps = limit or self._max_steps
-        old = self.sim.model
-        self.sim.load(map_id, cseed)
-        if self._renderer is not None and self.sim.model is not old:
-            self._renderer.close()
-            self._renderer = None
         obs = self.sim.reset()
         self._done = False
         return {k: v[0] for k, v in obs.items()}, {"map_id": map_id, "course_seed": cseed}

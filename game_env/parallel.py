@@ -6,22 +6,19 @@ import functools
 import warnings
 from typing import Any
 
-import mujoco
 import numpy as np
 from gymnasium import spaces as gym_spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
+from game_env.base import RaceSimEnvMixin
 from game_env.constants import FRAME_SKIP
-from game_env.maps import NUM_MAPS
 from game_env.options import (
-    COURSE_SEEDS,
     check_action,
     check_course_seed,
     check_map_choice,
     check_positive_int,
     check_render_mode,
-    check_reset_options,
 )
 from game_env.scene import MAX_RACERS
 from game_env.sim import RaceSim
@@ -30,7 +27,7 @@ from game_env.spaces import REWARD_TERMS, action_space, observation_space
 _IDLE = (1, 1, 0, 0, 0, 0, 0, 1)  # what a racer without an action this step does
 
 
-class RaceParallelEnv(ParallelEnv):
+class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
     """N racers ("racer_0", ...) race the same course; a finished racer leaves ``agents``.
 
     Arguments as ``ObstacleRaceEnv`` plus ``num_racers`` (1..16).
@@ -79,39 +76,13 @@ class RaceParallelEnv(ParallelEnv):
         """The (same, cached) action space of every racer."""
         return action_space()
 
-    @property
-    def model(self) -> mujoco.MjModel:
-        """The MuJoCo model of the current course."""
-        return self.sim.model
-
-    @property
-    def data(self) -> mujoco.MjData:
-        """The MuJoCo data of the current episode."""
-        return self.sim.data
-
-    @property
-    def dt(self) -> float:
-        """Seconds of race time per env step (timestep x frame_skip)."""
-        return self.sim.model.opt.timestep * self.frame_skip
-
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, dict[str, Any]]]:
         """Start an episode: every racer on the start pad (``options`` as the Gymnasium env)."""
         if seed is not None:
             self._rng, _ = seeding.np_random(seed)
-        opts = check_reset_options(options)
-        map_id = opts.get("map_id", self._map_choice)
-        if map_id is None:
-            map_id = int(self._rng.integers(NUM_MAPS))
-        cseed = opts.get("course_seed", self._course_seed)
-        if cseed is None:
-            cseed = int(self._rng.integers(COURSE_SEEDS))
-        old = getattr(self.sim, "model", None)
-        self.sim.load(map_id, cseed)
-        if self._renderer is not None and self.sim.model is not old:
-            self._renderer.close()
-            self._renderer = None
+        map_id, cseed = self._load_course(self._rng, options)
         obs = self.sim.reset()
         self.agents = list(self.possible_agents)
         self._live = set(self.agents)

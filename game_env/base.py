@@ -1,0 +1,55 @@
+"""What the Gymnasium and the PettingZoo env share: MuJoCo handles and the course per reset."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from game_env.maps import NUM_MAPS
+from game_env.options import COURSE_SEEDS, check_reset_options
+from game_env.sim import RaceSim
+
+
+class RaceSimEnvMixin:
+    """Mixed into both envs; they set `sim`, `frame_skip`, `_map_choice`, `_course_seed` and
+    `_renderer` in their constructors."""
+
+    sim: RaceSim
+    frame_skip: int
+    _map_choice: int | None
+    _course_seed: int | None
+    _renderer: Any
+
+    @property
+    def model(self) -> mujoco.MjModel:
+        """The MuJoCo model of the current course."""
+        return self.sim.model
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """The MuJoCo data of the current episode."""
+        return self.sim.data
+
+    @property
+    def dt(self) -> float:
+        """Seconds of race time per env step (timestep x frame_skip)."""
+        return self.sim.model.opt.timestep * self.frame_skip
+
+    def _load_course(self, rng: np.random.Generator, options: dict[str, Any] | None) -> tuple[int, int]:
+        """Pick (map_id, course_seed) for this episode (options, fixed choice, or `rng`) and
+        load it; a renderer bound to a replaced model is dropped."""
+        opts = check_reset_options(options)
+        map_id = opts.get("map_id", self._map_choice)
+        if map_id is None:
+            map_id = int(rng.integers(NUM_MAPS))
+        cseed = opts.get("course_seed", self._course_seed)
+        if cseed is None:
+            cseed = int(rng.integers(COURSE_SEEDS))
+        old = getattr(self.sim, "model", None)
+        self.sim.load(map_id, cseed)
+        if self._renderer is not None and self.sim.model is not old:
+            self._renderer.close()
+            self._renderer = None
+        return map_id, cseed
