@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -37,3 +40,36 @@ def bootstrap_ci(x: np.ndarray) -> tuple[float, float]:
         return float(x.mean()), float(x.mean())
     res = bootstrap((x,), np.mean, confidence_level=0.95, n_resamples=5000, random_state=0)
     return float(res.confidence_interval.low), float(res.confidence_interval.high)
+
+
+def run_method_seed_grid(
+    trainable: Callable[[dict[str, Any]], Any],
+    methods: Iterable[tuple[str, dict[str, Any] | None]],
+    seeds: Iterable[int],
+    shared: dict[str, Any],
+    out: Path,
+) -> None:
+    """One Tune trial (1 CPU) per (method, seed) whose `out/runs/<method>-<seed>.json` is
+    missing, so an interrupted benchmark resumes where it stopped.
+
+    Each trial gets `{"spec": {"method", "asor", "seed", "args": shared, "out"}}`.
+    """
+    import time
+
+    from ray import tune
+
+    methods = list(methods)
+    specs = [
+        {"method": n, "asor": a, "seed": s, "args": shared, "out": str(out)}
+        for s in seeds
+        for n, a in methods
+        if not (out / "runs" / f"{n}-{s}.json").exists()
+    ]
+    t0 = time.time()
+    if specs:
+        tune.Tuner(
+            tune.with_resources(trainable, {"cpu": 1}),
+            param_space={"spec": tune.grid_search(specs)},
+            run_config=tune.RunConfig(storage_path=str(out / "tune"), verbose=0),
+        ).fit()
+    print(f"trained {len(specs)} runs in {time.time() - t0:.0f} s")

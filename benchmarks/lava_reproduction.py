@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import bootstrap_ci, start_local_ray
+from benchmarks.common import bootstrap_ci, run_method_seed_grid, start_local_ray
 
 DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
 
@@ -277,24 +277,10 @@ def main(argv: list[str] | None = None) -> int:
     methods = [parse_method(m) for m in args.methods]
     names = [n for n, _ in methods]
     if not args.summarize_only:
-        from ray import tune
 
         start_local_ray(args.parallel)
         shared = {k: v for k, v in vars(args).items() if k in ("steps", "lr", "entropy")}
-        specs = [
-            {"method": n, "asor": a, "seed": s, "args": shared, "out": str(out)}
-            for s in range(args.first_seed, args.first_seed + args.seeds)
-            for n, a in methods
-            if not (out / "runs" / f"{n}-{s}.json").exists()
-        ]
-        t0 = time.time()
-        if specs:
-            tune.Tuner(
-                tune.with_resources(run_one, {"cpu": 1}),
-                param_space={"spec": tune.grid_search(specs)},
-                run_config=tune.RunConfig(storage_path=str(out / "tune"), verbose=0),
-            ).fit()
-        print(f"trained {len(specs)} runs in {time.time() - t0:.0f} s")
+        run_method_seed_grid(run_one, methods, range(args.first_seed, args.first_seed + args.seeds), shared, out)
     md = summarize(out, names)
     print(md)
     return 0

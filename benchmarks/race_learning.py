@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import start_local_ray
+from benchmarks.common import run_method_seed_grid, start_local_ray
 from benchmarks.lava_reproduction import parse_method
 
 DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
@@ -293,7 +293,6 @@ def main(argv: list[str] | None = None) -> int:
     methods = [parse_method(m) for m in args.methods]
     names = [n for n, _ in methods]
     if not args.summarize_only:
-        from ray import tune
 
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         t0 = time.time()
@@ -311,20 +310,7 @@ def main(argv: list[str] | None = None) -> int:
             "train_map",
         )
         shared = {k: v for k, v in vars(args).items() if k in keys}
-        specs = [
-            {"method": n, "asor": a, "seed": s, "args": shared, "out": str(out)}
-            for s in range(args.seeds)
-            for n, a in methods
-            if not (out / "runs" / f"{n}-{s}.json").exists()
-        ]
-        t0 = time.time()
-        if specs:
-            tune.Tuner(
-                tune.with_resources(run_one, {"cpu": 1}),
-                param_space={"spec": tune.grid_search(specs)},
-                run_config=tune.RunConfig(storage_path=str(out / "tune"), verbose=0),
-            ).fit()
-        print(f"trained {len(specs)} runs in {time.time() - t0:.0f} s")
+        run_method_seed_grid(run_one, methods, range(args.seeds), shared, out)
     md = summarize(out, names)
     print(md)
     return 0
