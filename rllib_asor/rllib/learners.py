@@ -194,15 +194,19 @@ class AsorCQLTorchLearner(_SoftQAsorMixin, CQLTorchLearner):
 
     asor_in_pipeline = False
 
+    def build(self) -> None:
+        super().build()
+        self._asor_offline_rows = 0
+
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
         super().before_gradient_based_update(timesteps=timesteps)
-        self._asor_timestep = float(getattr(self, "_asor_offline_rows", 0))
+        self._asor_timestep = float(self._asor_offline_rows)
 
     def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
-        self._asor_timestep = float(getattr(self, "_asor_offline_rows", 0))
+        self._asor_timestep = float(self._asor_offline_rows)
         self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)
         out = super()._update(batch, **kwargs)
-        self._asor_offline_rows = getattr(self, "_asor_offline_rows", 0) + max(
+        self._asor_offline_rows += max(
             (len(batch[pid][Columns.REWARDS]) for pid in self._asor_piece.aux_ids if pid in batch),
             default=0,
         )
