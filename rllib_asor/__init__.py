@@ -2,12 +2,17 @@
 
 `rllib_asor.with_asor(algo_config, **settings)` switches ASOR on for an RLlib config;
 `rllib_asor.AsorConfig` holds the settings; `rllib_asor.asor` is the method itself (torch +
-numpy, no ray). Imports are lazy so `import rllib_asor.envs` stays light.
+numpy, no ray). Importing the package registers our gymnasium ids (`rllib_asor/LavaWorld-v0`,
+...; entry points only, nothing heavy); everything else is imported lazily.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
+
+from rllib_asor.envs.registration import register_envs
+
+register_envs()
 
 if TYPE_CHECKING:
     from rllib_asor.asor.config import AsorConfig
