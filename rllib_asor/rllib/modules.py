@@ -11,6 +11,8 @@ they are part of the module state and survive checkpoint/restore.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from typing import Any
 
 import torch
@@ -26,6 +28,17 @@ from rllib_asor.asor.rnd import RND
 
 LABEL = "asor_label"
 ACTION_FEATURES = "asor_action"
+
+
+@contextlib.contextmanager
+def _seeded(seed: int | None) -> Iterator[None]:
+    """Initialise under `seed` without touching the process's global torch RNG stream."""
+    if seed is None:
+        yield
+        return
+    with torch.random.fork_rng():
+        torch.manual_seed(seed)
+        yield
 
 
 class _LearnerOnlyModule(TorchRLModule, SelfSupervisedLossAPI):
@@ -46,9 +59,8 @@ class AsorDiscriminatorModule(_LearnerOnlyModule):
 
     def setup(self) -> None:
         super().setup()
-        if self.asor.seed is not None:
-            torch.manual_seed(self.asor.seed)
-        self.disc = Discriminator(self.feature_dim, self.asor.disc_hiddens)
+        with _seeded(self.asor.seed):
+            self.disc = Discriminator(self.feature_dim, self.asor.disc_hiddens)
         init = self.asor.lambda_init if self.asor.lambda_ == "auto" else 0.0
         self.register_buffer("auto_lambda", torch.tensor(float(init)))
 
@@ -72,19 +84,19 @@ class AsorProxyModule(_LearnerOnlyModule):
 
     def setup(self) -> None:
         super().setup()
-        if self.asor.seed is not None:
-            torch.manual_seed(self.asor.seed + 1)
-        if self.asor.proxy == "rnd":
-            self.rnd = RND(
-                self.feature_dim, self.asor.rnd_hiddens, self.asor.rnd_embedding_dim, self.asor.seed
-            )
-        else:
-            self.ensemble = DynamicsEnsemble(
-                self.feature_dim,
-                flat_dim(self.action_space),
-                self.asor.ensemble_size,
-                self.asor.rnd_hiddens,
-            )
+        seed = None if self.asor.seed is None else self.asor.seed + 1
+        with _seeded(seed):
+            if self.asor.proxy == "rnd":
+                self.rnd = RND(
+                    self.feature_dim, self.asor.rnd_hiddens, self.asor.rnd_embedding_dim, seed
+                )
+            else:
+                self.ensemble = DynamicsEnsemble(
+                    self.feature_dim,
+                    flat_dim(self.action_space),
+                    self.asor.ensemble_size,
+                    self.asor.rnd_hiddens,
+                )
 
     @torch.no_grad()
     def update_and_count(
