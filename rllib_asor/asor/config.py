@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 MODES = ("asor", "srpo", "count", "random")
-PROXIES = ("rnd", "ensemble")
+PROXIES = ("rnd", "ensemble", "rnd_per_dynamics")
 REWARD_FORMS = ("log", "centered", "gail")
 ALGORITHMS = ("PPO", "APPO", "IMPALA", "SAC", "CQL")
 
@@ -40,7 +40,9 @@ class AsorConfig:
     mode: str = "asor"
     """Partition: asor (value then count), srpo (value only), count (count only), random."""
     proxy: str = "rnd"
-    """Visitation-count proxy: rnd (Random Network Distillation) or ensemble (disagreement)."""
+    """Visitation-count proxy: rnd (Random Network Distillation), ensemble (disagreement), or
+    rnd_per_dynamics (one RND predictor per dynamics id from `info["dynamics_id"]`; the count
+    under the least familiar dynamics — our extension, see rllib_asor.asor.rnd)."""
     reward_form: str = "log"
     """log: λ·log ω (paper); centered: log ω minus its batch mean; gail: −log(1 − ω) ≥ 0."""
     log_omega_min: float = -5.0
@@ -61,6 +63,8 @@ class AsorConfig:
     """RND output dimension."""
     rnd_lr: float = 1e-3
     """Adam learning rate of the RND predictor (or the dynamics ensemble)."""
+    dynamics_buckets: int = 8
+    """Predictors of `rnd_per_dynamics` (dynamics ids are taken modulo this)."""
     ensemble_size: int = 5
     """K, the number of dynamics models when proxy == "ensemble"."""
     lambda_target: float = 0.1
@@ -108,7 +112,7 @@ class AsorConfig:
             ):
                 _fail(key, v, "a non-empty list of positive integers")
             setattr(self, key, list(v))
-        for key in ("rnd_embedding_dim", "ensemble_size", "aux_epochs"):
+        for key in ("rnd_embedding_dim", "ensemble_size", "aux_epochs", "dynamics_buckets"):
             v = getattr(self, key)
             if (
                 not isinstance(v, int)

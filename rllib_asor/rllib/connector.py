@@ -32,7 +32,7 @@ from rllib_asor.asor.discriminator import discriminator_loss
 from rllib_asor.asor.encoding import flatten, select, select_space
 from rllib_asor.asor.partition import partition
 from rllib_asor.asor.reward import dual_ascent_step, reward_bonus, scheduled_lambda
-from rllib_asor.rllib.modules import ACTION_FEATURES, LABEL
+from rllib_asor.rllib.modules import ACTION_FEATURES, DYNAMICS_ID, LABEL
 
 ValueFn = Callable[[Any, dict[str, Any]], torch.Tensor]
 
@@ -48,6 +48,30 @@ class AuxModuleIds:
 def critic_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
     """V(s) from a `ValueFunctionAPI` module (PPO, APPO, IMPALA)."""
     return module.compute_values(batch)
+
+
+class AddDynamicsIdsToBatch(ConnectorV2):
+    """Adds `info["dynamics_id"]` of every step as a batch column (for `rnd_per_dynamics`).
+
+    Sits right after `AddObservationsFromEpisodesToBatch`, so its rows line up with OBS.
+    """
+
+    def __call__(self, *, rl_module: Any, batch: dict, episodes: Any, **kwargs: Any) -> Any:
+        for episode in self.single_agent_episode_iterator(episodes, agents_that_stepped_only=False):
+            infos = episode.get_infos(slice(0, len(episode)))
+            if any("dynamics_id" not in info for info in infos):
+                raise ValueError(
+                    "asor.proxy='rnd_per_dynamics' needs info['dynamics_id'] on every step; "
+                    "this env does not report it (use proxy: rnd or ensemble)"
+                )
+            self.add_n_batch_items(
+                batch,
+                DYNAMICS_ID,
+                items_to_add=[int(info["dynamics_id"]) for info in infos],
+                num_items=len(episode),
+                single_agent_episode=episode,
+            )
+        return batch
 
 
 class AsorRewardConnector(ConnectorV2):
@@ -128,7 +152,11 @@ class AsorRewardConnector(ConnectorV2):
                     select(flat_valid(pb[Columns.NEXT_OBS]), cfg.obs_keys), space
                 )
                 proxy_batch.update({ACTION_FEATURES: actions, Columns.NEXT_OBS: next_features})
-            counts = proxy.update_and_count(features, actions, next_features)
+            dynamics_ids = None
+            if cfg.proxy == "rnd_per_dynamics":
+                dynamics_ids = flat_valid(pb[DYNAMICS_ID]).long()
+                proxy_batch[DYNAMICS_ID] = dynamics_ids
+            counts = proxy.update_and_count(features, actions, next_features, dynamics_ids)
 
         rho_value, rho_count = cfg.effective_rhos
         real = partition(values, counts, rho_value, rho_count, mode=cfg.mode, rng=self._rng)

@@ -28,7 +28,12 @@ from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from rllib_asor.asor.config import AsorConfig
-from rllib_asor.rllib.connector import AsorRewardConnector, AuxModuleIds, critic_values
+from rllib_asor.rllib.connector import (
+    AddDynamicsIdsToBatch,
+    AsorRewardConnector,
+    AuxModuleIds,
+    critic_values,
+)
 
 DISC_PREFIX = "asor_disc."
 PROXY_PREFIX = "asor_proxy."
@@ -97,6 +102,8 @@ class AsorLearnerMixin:
             pipeline.insert_after(
                 AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch()
             )
+        if self.asor.proxy == "rnd_per_dynamics" and self.asor.needs_proxy:
+            pipeline.insert_after(AddObservationsFromEpisodesToBatch, AddDynamicsIdsToBatch())
         if self.asor_insert_before is None:
             pipeline.append(self._asor_piece)
         else:

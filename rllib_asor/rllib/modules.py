@@ -24,10 +24,11 @@ from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.discriminator import Discriminator, discriminator_loss
 from rllib_asor.asor.encoding import flat_dim, select_space
 from rllib_asor.asor.ensemble import DynamicsEnsemble
-from rllib_asor.asor.rnd import RND
+from rllib_asor.asor.rnd import RND, PerDynamicsRND
 
 LABEL = "asor_label"
 ACTION_FEATURES = "asor_action"
+DYNAMICS_ID = "asor_dynamics_id"
 
 
 @contextlib.contextmanager
@@ -90,6 +91,14 @@ class AsorProxyModule(_LearnerOnlyModule):
                 self.rnd = RND(
                     self.feature_dim, self.asor.rnd_hiddens, self.asor.rnd_embedding_dim, seed
                 )
+            elif self.asor.proxy == "rnd_per_dynamics":
+                self.rnd = PerDynamicsRND(
+                    self.feature_dim,
+                    self.asor.rnd_hiddens,
+                    self.asor.rnd_embedding_dim,
+                    self.asor.dynamics_buckets,
+                    seed,
+                )
             else:
                 self.ensemble = DynamicsEnsemble(
                     self.feature_dim,
@@ -102,12 +111,16 @@ class AsorProxyModule(_LearnerOnlyModule):
     def update_and_count(
         self,
         features: torch.Tensor,
-        actions: torch.Tensor | None,
-        next_features: torch.Tensor | None,
+        actions: torch.Tensor | None = None,
+        next_features: torch.Tensor | None = None,
+        dynamics_ids: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Fold the batch into the normalisers, then return c(s) (higher = visited more)."""
         if self.asor.proxy == "rnd":
             self.rnd.update_normalizer(features)
+            return self.rnd.count_proxy(features)
+        if self.asor.proxy == "rnd_per_dynamics":
+            self.rnd.update(features, dynamics_ids)
             return self.rnd.count_proxy(features)
         self.ensemble.update_normalizers(features, next_features)
         return self.ensemble.count_proxy(features, actions)
@@ -115,6 +128,8 @@ class AsorProxyModule(_LearnerOnlyModule):
     def _forward_train(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
         if self.asor.proxy == "rnd":
             return {"rnd_error": self.rnd.prediction_error(batch[Columns.OBS])}
+        if self.asor.proxy == "rnd_per_dynamics":
+            return {"rnd_error": self.rnd.prediction_error(batch[Columns.OBS], batch[DYNAMICS_ID])}
         return {
             "ensemble_loss": self.ensemble.loss(
                 batch[Columns.OBS], batch[ACTION_FEATURES], batch[Columns.NEXT_OBS]
@@ -124,7 +139,7 @@ class AsorProxyModule(_LearnerOnlyModule):
     def compute_self_supervised_loss(
         self, *, learner: Any, module_id: str, config: Any, batch: dict, fwd_out: dict, **kw: Any
     ) -> torch.Tensor:
-        if self.asor.proxy == "rnd":
+        if "rnd_error" in fwd_out:
             loss = fwd_out["rnd_error"].mean()
             learner.metrics.log_value((module_id, "rnd_loss"), loss.item(), window=1)
         else:

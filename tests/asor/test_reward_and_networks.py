@@ -165,3 +165,23 @@ def test_config_accepts_lambda_alias_schedule_and_auto():
     ]
     assert AsorConfig.from_dict({"lambda_": "auto"}).lambda_ == "auto"
     assert AsorConfig(mode="srpo", rho_value=0.5, rho_count=0.2).effective_rhos == (0.5, 1.0)
+
+
+def test_per_dynamics_rnd_counts_states_seen_under_every_dynamics_higher():
+    from rllib_asor.asor.rnd import PerDynamicsRND
+
+    torch.manual_seed(0)
+    rnd = PerDynamicsRND(4, [64, 64], 16, buckets=4, seed=0)
+    shared = torch.randn(128, 4)  # visited under dynamics 0 and 1
+    only_0 = torch.randn(128, 4) + 3.0  # visited under dynamics 0 only
+    x = torch.cat([shared, only_0, shared])
+    ids = torch.cat([torch.zeros(256), torch.ones(128)]).long()
+    rnd.update(x, ids)
+    opt = torch.optim.Adam([p for p in rnd.parameters() if p.requires_grad], lr=1e-3)
+    for _ in range(300):
+        loss = rnd.prediction_error(x, ids).mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    assert rnd.seen.tolist() == [1.0, 1.0, 0.0, 0.0]
+    assert rnd.count_proxy(shared).mean() > rnd.count_proxy(only_0).mean()

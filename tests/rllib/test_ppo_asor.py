@@ -190,3 +190,15 @@ def test_with_asor_makes_our_env_ids_buildable_on_remote_env_runners(ray_session
         assert algo.train()["env_runners"]["num_env_steps_sampled"] > 0
     finally:
         algo.stop()
+
+
+def test_rnd_per_dynamics_counts_with_the_envs_dynamics_ids(ray_session):
+    algo = lava_ppo(proxy="rnd_per_dynamics", dynamics_buckets=8).build_algo()
+    try:
+        result = algo.train()
+        proxy = algo.learner_group._learner.module[PROXY].unwrapped().rnd
+        # The lava rows 2..5 are the dynamics ids: exactly their buckets have been seen.
+        assert torch.nonzero(proxy.seen).flatten().tolist() == [2, 3, 4, 5]
+        assert np.isfinite(result["asor"]["rnd_loss"]) and result["asor"]["real_fraction"] > 0
+    finally:
+        algo.stop()
