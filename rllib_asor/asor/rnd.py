@@ -2,12 +2,28 @@
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Sequence
 
 import torch
 from torch import nn
 
 from rllib_asor.asor.networks import RunningMeanStd, mlp
+
+
+def _target_and_predictors(
+    in_dim: int, hiddens: Sequence[int], embedding_dim: int, count: int, seed: int | None
+) -> tuple[nn.Module, list[nn.Module]]:
+    """A frozen random target and `count` predictors; with a seed, drawn from it without
+    disturbing the global torch RNG stream."""
+    with torch.random.fork_rng() if seed is not None else contextlib.nullcontext():
+        if seed is not None:
+            torch.manual_seed(seed)
+        target = mlp(in_dim, hiddens, embedding_dim)
+        predictors = [mlp(in_dim, hiddens, embedding_dim) for _ in range(count)]
+    for p in target.parameters():
+        p.requires_grad_(False)
+    return target, predictors
 
 
 class RND(nn.Module):
@@ -24,15 +40,9 @@ class RND(nn.Module):
         seed: int | None = None,
     ) -> None:
         super().__init__()
-        gen_state = torch.random.get_rng_state()
-        if seed is not None:
-            torch.manual_seed(seed)
-        self.target = mlp(in_dim, hiddens, embedding_dim)
-        self.predictor = mlp(in_dim, hiddens, embedding_dim)
-        if seed is not None:
-            torch.random.set_rng_state(gen_state)
-        for p in self.target.parameters():
-            p.requires_grad_(False)
+        self.target, (self.predictor,) = _target_and_predictors(
+            in_dim, hiddens, embedding_dim, 1, seed
+        )
         self.obs_rms = RunningMeanStd(in_dim)
 
     def prediction_error(self, x: torch.Tensor) -> torch.Tensor:
@@ -70,15 +80,10 @@ class PerDynamicsRND(nn.Module):
         seed: int | None = None,
     ) -> None:
         super().__init__()
-        gen_state = torch.random.get_rng_state()
-        if seed is not None:
-            torch.manual_seed(seed)
-        self.target = mlp(in_dim, hiddens, embedding_dim)
-        self.predictors = nn.ModuleList(mlp(in_dim, hiddens, embedding_dim) for _ in range(buckets))
-        if seed is not None:
-            torch.random.set_rng_state(gen_state)
-        for p in self.target.parameters():
-            p.requires_grad_(False)
+        self.target, predictors = _target_and_predictors(
+            in_dim, hiddens, embedding_dim, buckets, seed
+        )
+        self.predictors = nn.ModuleList(predictors)
         self.obs_rms = RunningMeanStd(in_dim)
         self.register_buffer("seen", torch.zeros(buckets))
 
