@@ -13,14 +13,17 @@ from game_env.sim import RaceSim
 
 
 class RaceSimEnvMixin:
-    """Mixed into both envs; they set `sim`, `frame_skip`, `_map_choice`, `_course_seed` and
-    `_renderer` in their constructors."""
+    """Mixed into both envs; they set `sim`, `frame_skip`, `_map_choice`, `_course_seed`,
+    `_renderer`, `render_mode`, `width` and `height` in their constructors."""
 
     sim: RaceSim
     frame_skip: int
     _map_choice: int | None
     _course_seed: int | None
     _renderer: Any
+    render_mode: str | None
+    width: int
+    height: int
 
     @property
     def model(self) -> mujoco.MjModel:
@@ -36,6 +39,17 @@ class RaceSimEnvMixin:
     def dt(self) -> float:
         """Seconds of race time per env step (timestep x frame_skip)."""
         return self.sim.model.opt.timestep * self.frame_skip
+
+    def _chase_frame(self, racer_pos: np.ndarray) -> np.ndarray | None:
+        """An RGB frame chasing `racer_pos` when ``render_mode="rgb_array"``, else None."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            from game_env.render import RaceRenderer
+
+            self._renderer = RaceRenderer(self.sim.model, self.width, self.height)
+        self.sim.sync_visuals()
+        return self._renderer.chase(self.sim.data, racer_pos)
 
     def _load_course(self, rng: np.random.Generator, options: dict[str, Any] | None) -> tuple[int, int]:
         """Pick (map_id, course_seed) for this episode (options, fixed choice, or `rng`) and

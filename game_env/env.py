@@ -99,14 +99,7 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
 
     def render(self) -> np.ndarray | None:
         """An RGB frame (H, W, 3) chasing the racer, when ``render_mode="rgb_array"``."""
-        if self.render_mode != "rgb_array":
-            return None
-        if self._renderer is None:
-            from game_env.render import RaceRenderer
-
-            self._renderer = RaceRenderer(self.sim.model, self.width, self.height)
-        self.sim.sync_visuals()
-        return self._renderer.chase(self.sim.data, self.sim.pos[0])
+        return self._chase_frame(self.sim.pos[0])
 
     def close(self) -> None:
         """Free the renderer."""

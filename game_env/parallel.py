@@ -133,15 +133,8 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
 
     def render(self) -> np.ndarray | None:
         """An RGB frame chasing the leading racer, when ``render_mode="rgb_array"``."""
-        if self.render_mode != "rgb_array":
-            return None
-        if self._renderer is None:
-            from game_env.render import RaceRenderer
-
-            self._renderer = RaceRenderer(self.sim.model, self.width, self.height)
-        self.sim.sync_visuals()
         pos = self.sim.pos
-        return self._renderer.chase(self.sim.data, pos[int(np.argmax(pos[:, 0]))])
+        return self._chase_frame(pos[int(np.argmax(pos[:, 0]))])
 
     def close(self) -> None:
         """Free the renderer."""
