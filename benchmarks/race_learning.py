@@ -67,6 +67,12 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
         )
         .debugging(seed=seed)
     )
+    if getattr(args, "curriculum", None):
+        from rllib_asor.rllib.curriculum import MapCurriculum, map_curriculum_callback
+        from rllib_asor.rllib.race import RaceMetricsCallback
+
+        stages = MapCurriculum.from_dict(json.loads(args.curriculum))
+        config = config.callbacks([RaceMetricsCallback, map_curriculum_callback(stages)])
     if asor is not None:
         settings = {"seed": seed, "obs_keys": list(RACE_ASOR_OBS_KEYS)} | asor
         config = rllib_asor.with_asor(config, **settings)
@@ -181,7 +187,9 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
         steps = result["num_env_steps_sampled_lifetime"]
         ret = result["env_runners"].get("episode_return_mean", float("nan"))
         race = result.get("race", {})
-        curve.append([steps, ret, race.get("success_rate", float("nan"))])
+        curve.append(
+            [steps, ret, race.get("success_rate", float("nan")), race.get("curriculum_stage", 0)]
+        )
         tune.report({"steps": steps, "episode_return_mean": ret})
     train_s = time.time() - t0
     t1 = time.time()
@@ -198,7 +206,9 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
         "eval_wall_s": time.time() - t1,
         "eval": ev,
         "curve": curve,
-        "race_last": {k: float(v) for k, v in result.get("race", {}).items()},
+        "race_last": {
+            k: float(v) for k, v in result.get("race", {}).items() if not isinstance(v, dict)
+        },
         "asor_last": {k: float(v) for k, v in result.get("asor", {}).items()},
     }
     _write(Path(spec["out"]) / "runs" / f"{spec['method']}-{spec['seed']}.json", final)
@@ -283,6 +293,12 @@ def main(argv: list[str] | None = None) -> int:
         help="train on this one map (0..9) instead of a random map per episode; "
         "evaluation is always on all ten",
     )
+    parser.add_argument(
+        "--curriculum",
+        default=None,
+        help='a map curriculum as JSON, e.g. \'{"stages": [[2, 6], "random"], "threshold": 0.5}\' '
+        "(rllib_asor.rllib.curriculum.MapCurriculum); evaluation is always on all ten maps",
+    )
     parser.add_argument("--eval-episodes", type=int, default=1, help="episodes per map")
     parser.add_argument("--greedy", action="store_true", help="evaluate the argmax policy")
     parser.add_argument("--parallel", type=int, default=3, help="trials at once (1 CPU each)")
@@ -308,6 +324,7 @@ def main(argv: list[str] | None = None) -> int:
             "eval_episodes",
             "greedy",
             "train_map",
+            "curriculum",
         )
         shared = {k: v for k, v in vars(args).items() if k in keys}
         run_method_seed_grid(run_one, methods, range(args.seeds), shared, out)

@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 
 from game_env.maps import NUM_MAPS
-from game_env.options import COURSE_SEEDS, check_reset_options
+from game_env.options import COURSE_SEEDS, MapChoice, check_map_choice, check_reset_options
 from game_env.sim import RaceSim
 
 
@@ -18,7 +18,7 @@ class RaceSimEnvMixin:
 
     sim: RaceSim
     frame_skip: int
-    _map_choice: int | None
+    _map_choice: MapChoice
     _course_seed: int | None
     _renderer: Any
     render_mode: str | None
@@ -40,6 +40,17 @@ class RaceSimEnvMixin:
         """Seconds of race time per env step (timestep x frame_skip)."""
         return self.sim.model.opt.timestep * self.frame_skip
 
+    @property
+    def map_choice(self) -> MapChoice:
+        """Maps the next resets draw from: an int, a tuple of ints, or None (all ten)."""
+        return self._map_choice
+
+    def set_map_choice(self, map_id: Any) -> None:
+        """Change the maps drawn from at the next reset (as the ``map_id`` argument: an int,
+        a list of ints, or None/"random"); the running episode is not touched. Curricula
+        (`rllib_asor.rllib.curriculum`) call this on every env."""
+        self._map_choice = check_map_choice(map_id)
+
     def _chase_frame(self, racer_pos: np.ndarray) -> np.ndarray | None:
         """An RGB frame chasing `racer_pos` when ``render_mode="rgb_array"``, else None."""
         if self.render_mode != "rgb_array":
@@ -58,6 +69,8 @@ class RaceSimEnvMixin:
         map_id = opts.get("map_id", self._map_choice)
         if map_id is None:
             map_id = int(rng.integers(NUM_MAPS))
+        elif isinstance(map_id, tuple):
+            map_id = map_id[int(rng.integers(len(map_id)))]
         cseed = opts.get("course_seed", self._course_seed)
         if cseed is None:
             cseed = int(rng.integers(COURSE_SEEDS))

@@ -16,6 +16,7 @@ from game_env.options import (
     check_map_choice,
     check_positive_int,
     check_render_mode,
+    first_map,
 )
 from game_env.sim import RaceSim
 from game_env.spaces import REWARD_TERMS, action_space, observation_space
@@ -25,7 +26,8 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
     """Single-racer obstacle race (see ``game_env.spaces`` for spaces, RACE.md for rules).
 
     Args:
-        map_id: 0..9, or None / "random" to draw a map per reset from the env's RNG.
+        map_id: 0..9; a list of map ids (one drawn per reset); or None / "random" to draw
+            any of the ten per reset (draws use the env's RNG). `set_map_choice` changes it.
         course_seed: fixed course seed, or None to draw one (0..999) per reset.
         max_episode_steps: env steps before truncation (a Gymnasium ``TimeLimit`` given to
             ``gymnasium.make`` is honoured too).
@@ -37,7 +39,7 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
 
     def __init__(
         self,
-        map_id: int | str | None = 0,
+        map_id: int | list[int] | str | None = 0,
         course_seed: int | None = None,
         max_episode_steps: int = 1000,
         frame_skip: int = FRAME_SKIP,
@@ -56,8 +58,7 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
         self.action_space = action_space()
         self.sim = RaceSim(1, self.frame_skip, self._max_steps)
         self._renderer = None
-        first = 0 if self._map_choice is None else self._map_choice
-        self.sim.load(first, 0 if self._course_seed is None else self._course_seed)
+        self.sim.load(first_map(self._map_choice), 0 if self._course_seed is None else self._course_seed)
         self.sim.reset()
         self._done = False
 

@@ -15,11 +15,36 @@ COURSE_SEEDS = 1000  # course seeds drawn per reset when none is fixed
 RESET_OPTIONS = ("map_id", "course_seed")
 
 
-def check_map_choice(map_id: Any) -> int | None:
-    """An int 0..9, or None/"random" (a map drawn per reset) -> int or None."""
-    if map_id is None or map_id == "random":
+MapChoice = int | tuple[int, ...] | None
+"""A fixed map, maps to draw from per reset, or None (all maps)."""
+
+
+def check_map_choice(map_id: Any) -> MapChoice:
+    """An int 0..9; a non-empty list of them (one drawn per reset); or None/"random" (any of
+    the ten drawn per reset) -> int, tuple of distinct ints, or None."""
+    if map_id is None or (isinstance(map_id, str) and map_id == "random"):
         return None
+    if isinstance(map_id, (list, tuple)):
+        if not map_id:
+            raise ValueError(
+                "map_id=[] is not valid; allowed: an int in 0..9, a non-empty list of them, "
+                "or None/'random'"
+            )
+        maps = tuple(dict.fromkeys(check_map_id(m) for m in map_id))
+        return maps[0] if len(maps) == 1 else maps
+    if isinstance(map_id, str):
+        raise ValueError(
+            f"map_id={map_id!r} is not valid; allowed: an int in 0..9, a list of them, "
+            "or None/'random'"
+        )
     return check_map_id(map_id)
+
+
+def first_map(choice: MapChoice) -> int:
+    """The map a fresh env loads before its first reset."""
+    if choice is None:
+        return 0
+    return choice if isinstance(choice, int) else choice[0]
 
 
 def check_positive_int(name: str, value: Any, low: int = 1, high: int | None = None) -> int:

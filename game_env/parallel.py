@@ -19,6 +19,7 @@ from game_env.options import (
     check_map_choice,
     check_positive_int,
     check_render_mode,
+    first_map,
 )
 from game_env.scene import MAX_RACERS
 from game_env.sim import RaceSim
@@ -39,7 +40,7 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
     def __init__(
         self,
         num_racers: int = 4,
-        map_id: int | str | None = 0,
+        map_id: int | list[int] | str | None = 0,
         course_seed: int | None = None,
         max_episode_steps: int = 1000,
         frame_skip: int = FRAME_SKIP,
@@ -59,8 +60,7 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
         self.agents: list[str] = []
         self.sim = RaceSim(self.num_racers, self.frame_skip, self.max_episode_steps)
         self._rng, _ = seeding.np_random(None)
-        first = 0 if self._map_choice is None else self._map_choice
-        self.sim.load(first, 0 if self._course_seed is None else self._course_seed)  # model/data exist
+        self.sim.load(first_map(self._map_choice), 0 if self._course_seed is None else self._course_seed)  # model/data exist
         self.sim.reset()
         self._renderer = None
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
@@ -143,6 +143,6 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
             self._renderer = None
 
 
-def parallel_env(num_racers: int = 4, map_id: int | str | None = 0, **kwargs: Any) -> RaceParallelEnv:
+def parallel_env(num_racers: int = 4, map_id: int | list[int] | str | None = 0, **kwargs: Any) -> RaceParallelEnv:
     """A PettingZoo ParallelEnv with ``num_racers`` racers on map ``map_id``."""
     return RaceParallelEnv(num_racers=num_racers, map_id=map_id, **kwargs)

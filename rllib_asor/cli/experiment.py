@@ -40,6 +40,7 @@ SPECIAL_CONFIG_KEYS = (
     "env_to_module_connector",
     "rl_module",
     "multi_agent",
+    "curriculum",
 )
 # Config key (as written) -> key in AlgorithmConfig.to_dict() (the Tune param space).
 PARAM_SPACE_KEYS = {
@@ -393,6 +394,7 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
         connector = values.pop("env_to_module_connector", None)
         rl_module = values.pop("rl_module", None)
         multi = values.pop("multi_agent", None)
+        curriculum = _curriculum(values.pop("curriculum", None), exp)
         if multi is not None:
             try:
                 cfg.multi_agent(**multi_agent.parse(multi))
@@ -419,7 +421,30 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
             from rllib_asor.rllib.race import RaceMetricsCallback
 
             cfg.callbacks(RaceMetricsCallback)
+        if curriculum is not None:
+            existing = cfg.callbacks_class
+            existing = list(existing) if isinstance(existing, list | tuple) else [existing]
+            cfg.callbacks([*existing, curriculum])
     return cfg
+
+
+def _curriculum(block: Any, exp: Experiment) -> Any:
+    """The callback class for a ``curriculum:`` block (game_env envs only), or None."""
+    if block is None:
+        return None
+    key = f"{exp.name}.config.curriculum"
+    if not exp.env.startswith("game_env/"):
+        raise UsageError(
+            f"a map curriculum needs a race env; allowed envs: game_env/... (got {exp.env!r})",
+            source=exp.source,
+            key=key,
+        )
+    from rllib_asor.rllib.curriculum import MapCurriculum, map_curriculum_callback
+
+    try:
+        return map_curriculum_callback(MapCurriculum.from_dict(block))
+    except (TypeError, ValueError) as e:
+        raise UsageError(_one_line(e), source=exp.source, key=key) from None
 
 
 def _module_spec(block: dict[str, Any], exp: Experiment) -> Any:

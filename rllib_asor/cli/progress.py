@@ -15,7 +15,7 @@ BASE_COLUMNS = {
 }
 MAX_ASOR_COLUMNS = 8
 # Race metrics (result["race"], RaceMetricsCallback) shown when present.
-RACE_COLUMNS = ("success_rate", "trapped_rate")
+RACE_COLUMNS = ("success_rate", "trapped_rate", "curriculum_stage")
 # Shown first when present (DESIGN.md names); other asor/* metrics fill the remaining columns.
 PREFERRED_ASOR = ("disc_acc", "real_fraction", "aug_reward_mean", "disc_loss", "rnd_loss", "lambda")
 

@@ -93,11 +93,17 @@ def register_race_envs() -> None:
 
 
 # ---------------------------------------------------------------------- metrics
-def _last_metrics(agent_episode: Any) -> Mapping[str, Any] | None:
-    """``episode_metrics`` of the racer's last info that has them, or None."""
+PER_MAP_METRICS = ("success_rate", "goal_reward")
+"""Also logged per map as ``race/map_<m>/<name>`` (windowed means), with lifetime totals
+``race/map_<m>/episodes|success_sum|goal_reward_sum`` that a map curriculum
+(`rllib_asor.rllib.curriculum`) judges its stages by."""
+
+
+def _last_info(agent_episode: Any) -> Mapping[str, Any] | None:
+    """The racer's last info that has ``episode_metrics``, or None."""
     for info in reversed(list(agent_episode.get_infos())):
         if isinstance(info, Mapping) and "episode_metrics" in info:
-            return info["episode_metrics"]
+            return info
     return None
 
 
@@ -105,7 +111,7 @@ class RaceMetricsCallback(RLlibCallback):
     """Logs ``race/...`` episode metrics and ``race/policy_entropy``.
 
     On the env runners, each finished racer adds its ``info["episode_metrics"]`` to windowed
-    means (`RACE_METRICS`); after each iteration they are copied from ``env_runners`` to
+    means (`RACE_METRICS`, and `PER_MAP_METRICS` per map); after each iteration they are copied from ``env_runners`` to
     ``result["race"]`` together with the policy entropy (``learners/<policy>/entropy``;
     the mean over policies, and ``race/<policy>/policy_entropy`` when there are several).
     """
@@ -128,14 +134,29 @@ class RaceMetricsCallback(RLlibCallback):
             for agent_id, part in parts:
                 if agent_id in seen:
                     continue
-                em = _last_metrics(part)
-                if em is None:
+                info = _last_info(part)
+                if info is None:
                     continue
                 seen.add(agent_id)
+                em = info["episode_metrics"]
+                map_key = f"map_{info['map_id']}" if "map_id" in info else None
                 for name, key in RACE_METRICS.items():
-                    if key in em:
+                    if key not in em:
+                        continue
+                    value = float(em[key])
+                    metrics_logger.log_value(("race", name), value, window=METRICS_WINDOW)
+                    if map_key is not None and name in PER_MAP_METRICS:
                         metrics_logger.log_value(
-                            ("race", name), float(em[key]), window=METRICS_WINDOW
+                            ("race", map_key, name), value, window=METRICS_WINDOW
+                        )
+                if map_key is not None:  # exact running totals (curricula difference them)
+                    for name, value in (
+                        ("episodes", 1.0),
+                        ("success_sum", float(em.get("success", 0.0))),
+                        ("goal_reward_sum", float(em.get("goal_reward", 0.0))),
+                    ):
+                        metrics_logger.log_value(
+                            ("race", map_key, name), value, reduce="lifetime_sum"
                         )
 
     def on_train_result(self, *, algorithm: Any = None, result: dict, **kwargs: Any) -> None:
@@ -151,7 +172,7 @@ class RaceMetricsCallback(RLlibCallback):
                 for mid, value in entropies.items():
                     race[f"{mid}/policy_entropy"] = value
         if race:
-            result["race"] = race
+            result.setdefault("race", {}).update(race)
 
 
 # ---------------------------------------------------------------------- config

@@ -179,3 +179,18 @@ def test_bad_checkpoint_config_value_exits_2(write_yaml, capsys):
     rc, err = _run(capsys, ["train", "file", path])
     assert rc == 2
     _assert_one_line(err, path, "x.checkpoint_config", "num_to_keep")
+
+
+def test_curriculum_on_a_non_race_env_exits_2(write_yaml, capsys):
+    path = write_yaml(GOOD_HEAD + "  config: {curriculum: {stages: [2]}}\n")
+    rc, err = _run(capsys, ["train", "file", path])
+    assert rc == 2
+    _assert_one_line(err, "x.config.curriculum", "allowed envs: game_env/")
+
+
+def test_bad_curriculum_stage_exits_2(write_yaml, capsys):
+    head = "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n"
+    path = write_yaml(head + "  config: {curriculum: {stages: [[2], [12]]}}\n")
+    rc, err = _run(capsys, ["train", "file", path])
+    assert rc == 2
+    _assert_one_line(err, "x.config.curriculum", "stage 1", "allowed: 0..9")

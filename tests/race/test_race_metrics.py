@@ -84,3 +84,21 @@ def test_train_result_gets_race_block_with_policy_entropy():
         "a/policy_entropy": 1.0,
         "b/policy_entropy": 3.0,
     }
+
+
+def test_per_map_metrics_and_lifetime_totals():
+    logger = MetricsLogger()
+    for map_id, success in ((3, 1.0), (3, 0.0), (5, 1.0)):
+        ep = SingleAgentEpisode()
+        ep.add_env_reset(observation=obs(), infos={"map_id": map_id})
+        ep.add_env_step(
+            obs(), 0, 1.0, infos={"map_id": map_id, "episode_metrics": metrics(success)},
+            terminated=True,
+        )
+        RaceMetricsCallback().on_episode_end(episode=ep, metrics_logger=logger, env_index=0)
+    assert logger.peek(("race", "map_3", "success_rate")) == 0.5
+    assert logger.peek(("race", "map_3", "episodes")) == 2
+    assert logger.peek(("race", "map_3", "success_sum")) == 1
+    assert logger.peek(("race", "map_3", "goal_reward_sum")) == pytest.approx(0.3)
+    assert logger.peek(("race", "map_5", "success_rate")) == 1.0
+    assert logger.peek(("race", "success_rate")) == pytest.approx(2 / 3)
