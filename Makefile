@@ -29,16 +29,17 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks
 
-# Offline datasets (docs/offline.md): per env and dynamics a short SAC run, then random /
+# Offline datasets (docs/offline.md): per env and dynamics a PPO (or SAC) run, then random /
 # medium / expert / medium-replay data in data/offline/<task>/. Scale with the variables.
 DATASET_ENVS  ?= rllib_asor/HopperShift-v0
 DATASET_STEPS ?= 10000
-SAC_STEPS     ?= 20000
+TRAINER       ?= ppo
+TRAIN_STEPS   ?= 200000
 .PHONY: datasets
 datasets: $(STAMP)
 	for env in $(DATASET_ENVS); do \
 	  nice $(PY) -m rllib_asor.rllib.offline collect --env $$env --out data/offline \
-	    --steps $(DATASET_STEPS) --sac-steps $(SAC_STEPS) --overwrite || exit 1; \
+	    --steps $(DATASET_STEPS) --trainer $(TRAINER) --train-steps $(TRAIN_STEPS) --overwrite || exit 1; \
 	done
 
 bench: $(STAMP)

@@ -6,13 +6,14 @@ Layout written by `python -m rllib_asor.rllib.offline collect` (nothing is downl
     <out>/<task>/<dynamics>/<quality>/*.parquet one row per complete episode (column "item":
                                                 the episode's state packed with msgpack_numpy,
                                                 RLlib's `output_write_episodes=True` format)
-    <out>/<task>/<dynamics>/policies/<name>/    RLModule checkpoints of the SAC policies used
+    <out>/<task>/<dynamics>/policies/<name>/    RLModule checkpoints of the policies used
 
 `task` is the env id's short name (`rllib_asor/HopperShift-v0` -> `hopper`); `dynamics` are
 presets of `MujocoShiftEnv` (`original`, `body_mass` = mass x3, `density_10`); `quality` is
-`random` (uniform actions), `medium` (a partially trained SAC policy), `expert` (the best SAC
-policy of the run) or `medium-replay` (the SAC replay buffer up to the medium snapshot).
-Policies are trained per dynamics with a short SAC run whose size is a flag (`--sac-steps`).
+`random` (uniform actions), `medium` (a partially trained policy), `expert` (the best policy
+of the run) or `medium-replay` (what training saw up to the medium snapshot). Policies are
+trained per dynamics with PPO (default; ~10x cheaper per env step than RLlib's SAC on a small
+CPU machine) or SAC (`--trainer`), for `--train-steps` env steps.
 
 Normalised score (D4RL): 100 * (R - R_random) / (R_expert - R_random) with our own random and
 expert datasets' mean episode returns under the same dynamics.
@@ -47,6 +48,7 @@ MANIFEST = "manifest.json"
 QUALITIES = ("random", "medium", "expert", "medium-replay")
 DYNAMICS = ("original", "body_mass", "density_10")
 POLICY_QUALITIES = ("medium", "expert")
+TRAINERS = ("ppo", "sac")
 _HINT = "expected a dataset written by `python -m rllib_asor.rllib.offline collect`"
 
 
@@ -61,7 +63,7 @@ def task_name(env_id: str) -> str:
 # ------------------------------------------------------------------------------ collecting
 @dataclass
 class PolicySnapshot:
-    """One SAC policy state taken after a training iteration."""
+    """One policy state taken after a training iteration."""
 
     env_steps: int
     train_return: float
@@ -70,11 +72,11 @@ class PolicySnapshot:
 
 
 @dataclass
-class SacRun:
-    """Result of `train_sac`: per-iteration snapshots and the done replay episodes."""
+class TrainRun:
+    """Result of `train_policy`: per-iteration snapshots, and for SAC its replay episodes."""
 
     snapshots: list[PolicySnapshot]
-    replay_episodes: list[Any]
+    replay_episodes: list[Any] | None
     seconds: float
 
     def pick(self) -> dict[str, PolicySnapshot]:
@@ -82,7 +84,7 @@ class SacRun:
         the way from the first snapshot's return to the expert's (D4RL's "medium" is about a
         third of expert performance), never after the expert."""
         if not self.snapshots:
-            raise ValueError("SAC run has no snapshots; increase --sac-steps")
+            raise ValueError("training run has no snapshots; increase --train-steps")
         finite = [s for s in self.snapshots if math.isfinite(s.train_return)]
         if not finite:
             last = self.snapshots[-1]
@@ -120,10 +122,54 @@ def sac_config(env_id: str, dynamics: str, steps: int, seed: int) -> Any:
     )
 
 
-def train_sac(env_id: str, dynamics: str, steps: int, seed: int = 0, log: Any = print) -> SacRun:
-    """Train SAC for about `steps` env steps; snapshot the policy after every iteration."""
+def ppo_config(env_id: str, dynamics: str, steps: int, seed: int) -> Any:
+    """A MuJoCo PPO config (local sampling, 4 vector envs, 2048-step batches, 64x64 tanh nets,
+    separate value net; the usual MuJoCo settings) for `steps` env steps."""
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    batch = max(64, min(2048, steps))
+    return (
+        PPOConfig()
+        .environment(env_id, env_config={"dynamics": dynamics})
+        .env_runners(num_env_runners=0, num_envs_per_env_runner=4)
+        .learners(num_learners=0)
+        .training(
+            train_batch_size_per_learner=batch,
+            minibatch_size=min(64, batch),
+            num_epochs=10,
+            lr=3e-4,
+            gamma=0.99,
+            lambda_=0.95,
+            clip_param=0.2,
+            vf_clip_param=1e4,
+            entropy_coeff=0.0,
+        )
+        .rl_module(
+            model_config={
+                "fcnet_hiddens": [64, 64],
+                "fcnet_activation": "tanh",
+                "vf_share_layers": False,
+            }
+        )
+        .debugging(seed=seed, log_level="ERROR")
+    )
+
+
+_CONFIGS = {"ppo": ppo_config, "sac": sac_config}
+
+
+def trainer_config(trainer: str, env_id: str, dynamics: str, steps: int, seed: int) -> Any:
+    """The algorithm config `collect` trains with (`TRAINERS`)."""
+    _check_choices("trainer", [trainer], TRAINERS)
+    return _CONFIGS[trainer](env_id, dynamics, steps, seed)
+
+
+def train_policy(
+    trainer: str, env_id: str, dynamics: str, steps: int, seed: int = 0, log: Any = print
+) -> TrainRun:
+    """Train `trainer` for about `steps` env steps; snapshot the policy after every iteration."""
     t0 = time.perf_counter()
-    algo = sac_config(env_id, dynamics, steps, seed).build_algo()
+    algo = trainer_config(trainer, env_id, dynamics, steps, seed).build_algo()
     snapshots: list[PolicySnapshot] = []
     try:
         sampled = 0
@@ -132,39 +178,49 @@ def train_sac(env_id: str, dynamics: str, steps: int, seed: int = 0, log: Any = 
             runners = result.get("env_runners", {})
             sampled = int(runners.get("num_env_steps_sampled_lifetime", sampled + 1))
             ret = float(runners.get("episode_return_mean", float("nan")))
-            buffer = algo.local_replay_buffer
+            buffer = getattr(algo, "local_replay_buffer", None)
             snapshots.append(
                 PolicySnapshot(
                     env_steps=sampled,
                     train_return=ret,
-                    num_replay_episodes=len(buffer.episodes),
+                    num_replay_episodes=len(buffer.episodes) if buffer is not None else 0,
                     state=copy.deepcopy(algo.get_module().get_state()),
                 )
             )
-            log(f"  sac {dynamics}: {sampled} steps, train return {ret:.1f}")
-        episodes = list(algo.local_replay_buffer.episodes)
+            log(f"  {trainer} {dynamics}: {sampled} steps, train return {ret:.1f}")
+        replay = list(algo.local_replay_buffer.episodes) if trainer == "sac" else None
     finally:
         algo.stop()
-    return SacRun(snapshots, episodes, time.perf_counter() - t0)
+    return TrainRun(snapshots, replay, time.perf_counter() - t0)
 
 
-def _runner(env_id: str, dynamics: str, seed: int) -> Any:
-    """An RLlib SingleAgentEnvRunner with a SAC module on the env under `dynamics`."""
+def _runner(trainer: str, env_id: str, dynamics: str, seed: int) -> Any:
+    """An RLlib SingleAgentEnvRunner with the trainer's module on the env under `dynamics`."""
     from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 
-    config = sac_config(env_id, dynamics, 1000, seed).env_runners(batch_mode="complete_episodes")
+    config = trainer_config(trainer, env_id, dynamics, 1000, seed).env_runners(
+        num_envs_per_env_runner=1, batch_mode="complete_episodes"
+    )
     return SingleAgentEnvRunner(config=config)
 
 
 def sample_episodes(
     runner: Any, steps: int, *, random_actions: bool = False, explore: bool = True
 ) -> list[Any]:
-    """Complete episodes from `runner` until at least `steps` env steps are collected."""
+    """Complete episodes from `runner` until at least `steps` env steps are collected.
+
+    Actions are stored in the module's normalised space clipped to [-1, 1] (what the env
+    ran): a Gaussian PPO policy samples outside it, which a tanh-squashed CQL policy cannot
+    represent (its log-likelihood of such an action is undefined).
+    """
     episodes: list[Any] = []
     total = 0
     while total < steps:
         for eps in runner.sample(num_episodes=1, random_actions=random_actions, explore=explore):
             if eps.is_done:
+                actions = eps.actions.data
+                if isinstance(actions, np.ndarray) and actions.dtype.kind == "f":
+                    np.clip(actions, -1.0, 1.0, out=actions)
                 episodes.append(eps)
                 total += len(eps)
     return episodes
@@ -209,15 +265,17 @@ def collect(
     *,
     dynamics: Sequence[str] = DYNAMICS,
     qualities: Sequence[str] = QUALITIES,
-    sac_steps: int = 20_000,
+    train_steps: int = 200_000,
+    trainer: str = "ppo",
     seed: int = 0,
     overwrite: bool = False,
     log: Any = print,
 ) -> Path:
     """Collect `steps` env steps per (dynamics, quality) under `out/<task>/`; return that dir.
 
-    `sac_steps=0` skips training: medium/expert then use the untrained SAC policy (for tests)
-    and medium-replay is unavailable.
+    Policies are trained with `trainer` ("ppo" or "sac") for `train_steps` env steps per
+    dynamics. `train_steps=0` skips training: medium/expert then use the untrained policy (for
+    tests) and medium-replay is unavailable.
     """
     import ray
 
@@ -226,10 +284,11 @@ def collect(
     _check_choices("quality", qualities, QUALITIES)
     if steps < 1:
         raise ValueError(f"steps={steps!r} is invalid: allowed an integer >= 1")
-    if sac_steps < 0:
-        raise ValueError(f"sac_steps={sac_steps!r} is invalid: allowed an integer >= 0")
-    if sac_steps == 0 and "medium-replay" in qualities:
-        raise ValueError("quality 'medium-replay' needs SAC training: set sac_steps > 0")
+    _check_choices("trainer", [trainer], TRAINERS)
+    if train_steps < 0:
+        raise ValueError(f"train_steps={train_steps!r} is invalid: allowed an integer >= 0")
+    if train_steps == 0 and "medium-replay" in qualities:
+        raise ValueError("quality 'medium-replay' needs training: set train_steps > 0")
     if not dynamics:
         raise ValueError("dynamics is empty: allowed one or more of " + ", ".join(DYNAMICS))
     if not ray.is_initialized():
@@ -250,14 +309,16 @@ def collect(
             "env": env_id,
             "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
             "command": " ".join(sys.argv) if sys.argv else "",
-            "settings": {"steps": steps, "sac_steps": sac_steps, "seed": seed},
+            "settings": {
+                "steps": steps, "trainer": trainer, "train_steps": train_steps, "seed": seed
+            },
             "datasets": {},
             "reference_returns": {},
             "policies": {},
         }
         for dyn in dynamics:
             manifest["datasets"][dyn], manifest["policies"][dyn] = _collect_dynamics(
-                env_id, dyn, tmp / dyn, steps, qualities, sac_steps, seed, log
+                env_id, dyn, tmp / dyn, steps, qualities, trainer, train_steps, seed, log
             )
             stats = manifest["datasets"][dyn]
             refs = {q: stats[q]["return_mean"] for q in ("random", "expert") if q in stats}
@@ -284,18 +345,19 @@ def _collect_dynamics(
     root: Path,
     steps: int,
     qualities: Sequence[str],
-    sac_steps: int,
+    trainer: str,
+    train_steps: int,
     seed: int,
     log: Any,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     stats: dict[str, Any] = {}
     policies: dict[str, Any] = {}
-    runner = _runner(env_id, dyn, seed)
+    runner = _runner(trainer, env_id, dyn, seed)
     try:
         picked: dict[str, PolicySnapshot] = {}
         run = None
-        if sac_steps > 0 and set(qualities) & {"medium", "expert", "medium-replay"}:
-            run = train_sac(env_id, dyn, sac_steps, seed, log)
+        if train_steps > 0 and set(qualities) & {"medium", "expert", "medium-replay"}:
+            run = train_policy(trainer, env_id, dyn, train_steps, seed, log)
             picked = run.pick()
         else:
             untrained = PolicySnapshot(0, float("nan"), 0, runner.module.get_state())
@@ -306,15 +368,13 @@ def _collect_dynamics(
                 "path": f"{dyn}/policies/{name}",
                 "env_steps": snap.env_steps,
                 "train_return": snap.train_return if math.isfinite(snap.train_return) else None,
-                "sac_seconds": round(run.seconds, 1) if run is not None else 0.0,
+                "trainer": trainer,
+                "train_seconds": round(run.seconds, 1) if run is not None else 0.0,
             }
         for quality in qualities:
             if quality == "medium-replay":
                 assert run is not None
-                cut = picked["medium"].num_replay_episodes
-                episodes = [e for e in run.replay_episodes[:cut] if e.is_done]
-                if not episodes:
-                    episodes = [e for e in run.replay_episodes if e.is_done]
+                episodes = _replay_episodes(run, picked["medium"], runner, steps)
             else:
                 if quality != "random":
                     runner.module.set_state(picked[quality].state)
@@ -328,6 +388,22 @@ def _collect_dynamics(
     finally:
         runner.stop()
     return stats, policies
+
+
+def _replay_episodes(run: TrainRun, medium: PolicySnapshot, runner: Any, steps: int) -> list[Any]:
+    """medium-replay: what training saw up to the medium snapshot. SAC: its replay buffer's
+    complete episodes (all of them if none is complete by then). PPO keeps no buffer: each
+    snapshot up to medium re-samples an equal share of `steps` (the policies training ran)."""
+    if run.replay_episodes is not None:
+        cut = medium.num_replay_episodes
+        episodes = [e for e in run.replay_episodes[:cut] if e.is_done]
+        return episodes or [e for e in run.replay_episodes if e.is_done]
+    upto = [s for s in run.snapshots if s.env_steps <= medium.env_steps] or [medium]
+    episodes = []
+    for snap in upto:
+        runner.module.set_state(snap.state)
+        episodes += sample_episodes(runner, max(1, steps // len(upto)))
+    return episodes
 
 
 def _check_choices(key: str, values: Iterable[str], allowed: Sequence[str]) -> None:
@@ -580,17 +656,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         prog="python -m rllib_asor.rllib.offline", description=__doc__.split("\n")[0]
     )
     sub = p.add_subparsers(dest="cmd", required=True)
-    c = sub.add_parser("collect", help="train SAC per dynamics and write the datasets")
+    c = sub.add_parser("collect", help="train a policy per dynamics and write the datasets")
     c.add_argument("--env", required=True, help="env id, e.g. rllib_asor/HopperShift-v0")
     c.add_argument("--out", default="data/offline", help="output root (default data/offline)")
     c.add_argument("--steps", type=int, required=True, help="env steps per (dynamics, quality)")
     c.add_argument("--dynamics", nargs="+", default=list(DYNAMICS), help="dynamics presets")
     c.add_argument("--qualities", nargs="+", default=list(QUALITIES), choices=QUALITIES)
+    c.add_argument("--trainer", choices=TRAINERS, default="ppo", help="policy trainer (ppo)")
     c.add_argument(
+        "--train-steps",
         "--sac-steps",
+        dest="train_steps",
         type=int,
-        default=20_000,
-        help="SAC env steps per dynamics (0: untrained policy)",
+        default=200_000,
+        help="trainer env steps per dynamics (0: untrained policy)",
     )
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--overwrite", action="store_true", help="replace an existing task dir")
@@ -613,7 +692,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             torch.set_num_threads(args.torch_threads)
             collect(
                 args.env, args.out, args.steps, dynamics=args.dynamics, qualities=args.qualities,
-                sac_steps=args.sac_steps, seed=args.seed, overwrite=args.overwrite,
+                train_steps=args.train_steps, trainer=args.trainer, seed=args.seed,
+                overwrite=args.overwrite,
             )  # fmt: skip
         elif args.cmd == "info":
             ds = load_dataset(args.path)

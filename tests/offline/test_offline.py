@@ -26,7 +26,7 @@ def dataset(ray_session, tmp_path_factory) -> Path:
     """200 steps of uniform actions and 200 of an untrained SAC policy under each dynamics."""
     out = tmp_path_factory.mktemp("offline")
     return offline.collect(
-        ENV, out, STEPS, qualities=("random", "expert"), sac_steps=0, log=lambda *_: None
+        ENV, out, STEPS, qualities=("random", "expert"), train_steps=0, log=lambda *_: None
     )
 
 
@@ -66,7 +66,7 @@ def test_parquet_rows_are_complete_rllib_episodes_matching_the_manifest(dataset)
 
 def test_collect_refuses_to_replace_an_existing_task_dir(dataset):
     with pytest.raises(ValueError, match="exists; pass --overwrite"):
-        offline.collect(ENV, dataset.parent, STEPS, qualities=("random",), sac_steps=0)
+        offline.collect(ENV, dataset.parent, STEPS, qualities=("random",), train_steps=0)
 
 
 def test_bad_dataset_paths_raise_value_errors_naming_path_and_format(dataset, tmp_path):
