@@ -42,12 +42,14 @@ ASOR_BASE = {
 }
 
 
-def parse_method(text: str) -> tuple[str, dict[str, Any] | None]:
-    """`name[:k=v,...]` → (name, asor settings or None for plain SAC)."""
+def parse_method(
+    text: str, plain: str = "sac", base: dict[str, Any] = ASOR_BASE
+) -> tuple[str, dict[str, Any] | None]:
+    """`name[:k=v,...]` → (name, `base` updated with k=v; None for the plain algorithm)."""
     name, _, rest = text.partition(":")
-    if name == "sac" and not rest:
+    if name == plain and not rest:
         return name, None
-    settings: dict[str, Any] = dict(ASOR_BASE)
+    settings: dict[str, Any] = dict(base)
     for item in filter(None, rest.split(",")):
         key, _, value = item.partition("=")
         try:
