@@ -36,7 +36,9 @@ def test_race_example_validates_with_paper_settings(path):
         assert exp.warnings == []  # no legacy keys in our own examples
         assert exp.env.startswith("game_env/ObstacleRace")
         assert cfg._rl_module_spec.module_class.__name__ == "RaceNetModule"
-        assert cfg.callbacks_class.__name__ == "RaceMetricsCallback"
+        callbacks = cfg.callbacks_class
+        callbacks = callbacks if isinstance(callbacks, list) else [callbacks]
+        assert callbacks[0].__name__ == "RaceMetricsCallback"
         assert cfg.train_batch_size == 1024 and cfg.entropy_coeff == 0.003
         assert cfg.lr[0] == [0, 1e-3] and cfg.lr[-1][1] == 3e-4
         assert cfg.num_env_runners == 2 and cfg.num_cpus_per_env_runner == 0.5
@@ -46,6 +48,17 @@ def test_race_example_validates_with_paper_settings(path):
         if exp.env.endswith("Multi-v0"):
             assert cfg.is_multi_agent and set(cfg.policies) == {"shared"}
             assert cfg.policy_mapping_fn("racer_3", None) == "shared"
+
+
+def test_curriculum_example_adds_the_map_curriculum():
+    from rllib_asor.rllib.curriculum import MapCurriculumCallback
+
+    [exp] = E.load_file(str(REPO / "tuned_examples/race/ppo-asor-curriculum.yaml"))
+    cfg = E.validate(exp)
+    _, curriculum = cfg.callbacks_class
+    assert issubclass(curriculum, MapCurriculumCallback)
+    assert curriculum.curriculum.stages == ((6, 2), (6, 2, 8, 7, 1), None)
+    assert "curriculum" not in E.param_space(exp, cfg)  # applied as a callback, not a key
 
 
 def test_race_sweep_expands_lambda_rho_and_seeds():
