@@ -159,7 +159,9 @@ def main(argv: list[str] | None = None) -> None:
         import rllib_asor.envs  # noqa: F401
 
         args.data = str(Path(args.data).resolve())  # Ray Data reads it from its own workers
-        start_local_ray(2)
+        # Ray Data runs OfflinePreLearner in 2 one-CPU actors next to its read task: with 2
+        # logical CPUs the pipeline waits forever for a third (measured: 3/2 CPU requested).
+        start_local_ray(4)
         (out / "runs").mkdir(parents=True, exist_ok=True)
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             for text in args.methods:

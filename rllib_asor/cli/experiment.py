@@ -598,11 +598,28 @@ def param_space(exp: Experiment, algo_config: Any | None = None) -> dict[str, An
 
 
 def required_cpus(algo_config: Any) -> float:
-    """Logical CPUs one trial asks for (main process + env runners + learners)."""
+    """Logical CPUs one trial needs: main process + env runners + learners, plus the Ray
+    Data tasks and actors of an offline run (`offline_data_cpus`)."""
     cls = algo_config.algo_class
     try:
         pgf = cls.default_resource_request(algo_config)
-        return float(pgf.required_resources.get("CPU", 1))
+        trial = float(pgf.required_resources.get("CPU", 1))
     except Exception:
         c = algo_config
-        return 1.0 + c.num_env_runners * c.num_cpus_per_env_runner + max(c.num_learners, 0)
+        trial = 1.0 + c.num_env_runners * c.num_cpus_per_env_runner + max(c.num_learners, 0)
+    return trial + offline_data_cpus(algo_config)
+
+
+def offline_data_cpus(algo_config: Any) -> float:
+    """CPUs an offline run's Ray Data pipeline takes outside the trial's own reservation:
+    a read task (1) and RLlib's `OfflinePreLearner` actors (`map_batches_kwargs` concurrency,
+    default max(2, num_learners), 1 CPU each unless `num_cpus` says otherwise). Without them
+    free, reading waits forever (measured on 2 CPUs: "3/2 CPU requested", no progress)."""
+    source = getattr(algo_config, "input_", "sampler")
+    if not source or source == "sampler":
+        return 0.0
+    kwargs = dict(getattr(algo_config, "map_batches_kwargs", None) or {})
+    concurrency = kwargs.get("concurrency", max(2, algo_config.num_learners))
+    if isinstance(concurrency, tuple | list):  # (min, max) actor pool
+        concurrency = concurrency[-1]
+    return 1.0 + float(concurrency) * float(kwargs.get("num_cpus", 1.0))

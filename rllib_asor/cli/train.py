@@ -125,6 +125,18 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _max_concurrent(algo_config: Any) -> int | None:
+    """Offline runs: as many trials at once as the cluster has CPUs for, Ray Data included
+    (Tune counts only the trials' own reservations and would start trials whose readers then
+    wait forever). None (Tune's rule) otherwise."""
+    import ray
+
+    if not E.offline_data_cpus(algo_config):
+        return None
+    cpus = float(ray.cluster_resources().get("CPU", 1.0))
+    return max(1, int(cpus // E.required_cpus(algo_config)))
+
+
 def _check_resumable(path: str) -> None:
     from ray import tune
 
@@ -171,7 +183,9 @@ def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> i
             trainable,
             param_space=space,
             run_config=run_config,
-            tune_config=tune.TuneConfig(num_samples=exp.num_samples),
+            tune_config=tune.TuneConfig(
+                num_samples=exp.num_samples, max_concurrent_trials=_max_concurrent(algo_config)
+            ),
         )
     results = tuner.fit()
     _print_summary(exp, results)

@@ -19,3 +19,20 @@ def test_relative_input_paths_become_absolute(tmp_path, monkeypatch):
 def test_sampler_and_uris_are_kept():
     assert _input_of("sampler") == "sampler"
     assert _input_of("gs://bucket/data") == "gs://bucket/data"
+
+
+def test_offline_runs_reserve_cpus_for_ray_data():
+    """A local Ray sized for the trial alone left Ray Data's readers waiting forever (2 CPUs:
+    the trial took 1, Ray Data asked for 3)."""
+    from ray.rllib.algorithms.cql import CQLConfig
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    from rllib_asor.cli.experiment import offline_data_cpus, required_cpus
+
+    online = PPOConfig().env_runners(num_env_runners=0)
+    assert offline_data_cpus(online) == 0 and required_cpus(online) == 1
+    offline = CQLConfig().env_runners(num_env_runners=0).offline_data(input_=["/data/x"])
+    assert offline_data_cpus(offline) == 3  # one read task + 2 OfflinePreLearner actors
+    assert required_cpus(offline) == 4
+    offline.offline_data(map_batches_kwargs={"concurrency": 1, "num_cpus": 0.5})
+    assert offline_data_cpus(offline) == 1.5
