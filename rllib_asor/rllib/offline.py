@@ -294,7 +294,7 @@ def collect(
     if not ray.is_initialized():
         ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
 
-    out = Path(out)
+    out = Path(out).resolve()  # RLModule.save_to_path wants an absolute path (a URI)
     task = task_name(env_id)
     final = out / task
     if final.exists() and not overwrite:

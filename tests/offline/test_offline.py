@@ -69,6 +69,17 @@ def test_collect_refuses_to_replace_an_existing_task_dir(dataset):
         offline.collect(ENV, dataset.parent, STEPS, qualities=("random",), train_steps=0)
 
 
+def test_collect_into_a_relative_out_dir(tmp_path, monkeypatch):
+    """`make datasets` passes `--out data/offline`; saving the policies needs absolute paths."""
+    monkeypatch.chdir(tmp_path)
+    task = offline.collect(
+        ENV, "data/offline", 50, dynamics=("original",), qualities=("random",), train_steps=0,
+        log=lambda *_: None,
+    )
+    assert task == tmp_path / "data" / "offline" / "hopper"
+    assert (task / "original" / "policies" / "expert").is_dir()
+
+
 def test_bad_dataset_paths_raise_value_errors_naming_path_and_format(dataset, tmp_path):
     missing = tmp_path / "nope"
     with pytest.raises(ValueError, match=f"{missing}.*does not exist.*offline collect"):
