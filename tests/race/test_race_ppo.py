@@ -48,7 +48,13 @@ def check_result(result, policy):
         assert math.isfinite(asor[key]), key
     assert asor["aug_reward_max"] <= 0.0
     race = result["race"]
-    assert set(race) == {*RACE_METRICS, "policy_entropy"}
+    per_map = {k: v for k, v in race.items() if k.startswith("map_")}
+    assert set(race) - set(per_map) == {*RACE_METRICS, "policy_entropy"}
+    assert per_map and all(
+        set(v) == {"success_rate", "goal_reward", "episodes", "success_sum", "goal_reward_sum"}
+        for v in per_map.values()
+    )
+    assert sum(v["episodes"] for v in per_map.values()) >= 4
     assert race["policy_entropy"] == pytest.approx(result["learners"][policy]["entropy"])
     assert 0.0 <= race["success_rate"] <= 1.0 and 0.0 <= race["trapped_rate"] <= 1.0
     assert 0.0 <= race["unnecessary_jump_rate"] <= 1.0 and race["distance_from_cliff"] >= 0.0
