@@ -31,6 +31,17 @@ def start_local_ray(num_cpus: int = 2) -> None:
     )
 
 
+def write_json(path: Path, data: Any) -> None:
+    """Write `data` as JSON to `path` atomically (a temp file renamed into place), so an
+    interrupted benchmark never leaves a half-written run file that a rerun would skip."""
+    import json
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data))
+    os.replace(tmp, path)
+
+
 def bootstrap_ci(x: np.ndarray) -> tuple[float, float]:
     """95% bootstrap confidence interval of the mean (scipy); degenerate for n < 2."""
     from scipy.stats import bootstrap

@@ -16,14 +16,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from benchmarks.common import bootstrap_ci, run_method_seed_grid, start_local_ray
+from benchmarks.common import bootstrap_ci, run_method_seed_grid, start_local_ray, write_json
 
 DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
 
@@ -164,10 +163,7 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
     ):
         final["pseudo_counts"] = pseudo_counts(algo.learner_group._learner)
     out = Path(spec["out"]) / "runs" / f"{spec['method']}-{spec['seed']}.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(final))
-    os.replace(tmp, out)
+    write_json(out, final)
     algo.stop()
     tune.report({"steps": steps, "greedy_return_mean": final["greedy_return_mean"], "done": True})
     return final

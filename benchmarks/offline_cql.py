@@ -19,14 +19,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from benchmarks.common import start_local_ray
+from benchmarks.common import start_local_ray, write_json
 from benchmarks.mujoco_shift import parse_method
 
 DEFAULT_METHODS = ("cql", "srpo:mode=srpo", "asor:mode=asor")
@@ -171,9 +170,7 @@ def main(argv: list[str] | None = None) -> None:
                     continue
                 print(f"run {args.quality} {name} seed {seed}", flush=True)
                 res = run_one(name, seed, asor, args)
-                tmp = path.with_suffix(".tmp")
-                tmp.write_text(json.dumps(res))
-                os.replace(tmp, path)
+                write_json(path, res)
                 print(f"  eval {res['eval']['mean']} wall {res['wall_s']:.0f}s", flush=True)
         ray.shutdown()
     print(summarize(out))
