@@ -28,6 +28,7 @@ from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
 from ray.rllib.policy.policy import PolicySpec
 
 from rllib_asor.models.race_net import RaceNetModule
+from rllib_asor.rllib.curriculum import MapCurriculum, map_curriculum_callback
 
 SINGLE_ENV = "game_env/ObstacleRace-v0"
 """Tune name of the single-racer env (same as its gymnasium id)."""
@@ -188,6 +189,7 @@ def race_ppo_config(
     max_episode_steps: int | None = None,
     env_config: Mapping[str, Any] | None = None,
     model_config: Mapping[str, Any] | None = None,
+    curriculum: MapCurriculum | Mapping[str, Any] | None = None,
 ) -> PPOConfig:
     """PPO on the race with `RaceNetModule` and `RaceMetricsCallback` (ASOR not yet wired).
 
@@ -198,6 +200,8 @@ def race_ppo_config(
         max_episode_steps: episode length limit (None: the env's default, 1000).
         env_config: further env keyword arguments (``course_seed``, ``frame_skip``, ...).
         model_config: `RaceNetModule` settings (see `rllib_asor.models.race_net.DEFAULTS`).
+        curriculum: a `MapCurriculum` (or its dict, as the YAML block) to train over maps
+            in stages (`rllib_asor.rllib.curriculum`); its stages override `map_id`.
 
     Registers the race envs with Tune. Set training/env-runner settings on the result.
     """
@@ -210,7 +214,12 @@ def race_ppo_config(
     if max_episode_steps is not None:
         cfg["max_episode_steps"] = max_episode_steps
     module_spec = RLModuleSpec(module_class=RaceNetModule, model_config=dict(model_config or {}))
-    config = PPOConfig().callbacks(RaceMetricsCallback)
+    callbacks: list[type] = [RaceMetricsCallback]
+    if curriculum is not None:
+        if not isinstance(curriculum, MapCurriculum):
+            curriculum = MapCurriculum.from_dict(curriculum)
+        callbacks.append(map_curriculum_callback(curriculum))
+    config = PPOConfig().callbacks(callbacks if len(callbacks) > 1 else callbacks[0])
     if num_racers == 1:
         return config.environment(SINGLE_ENV, env_config=cfg).rl_module(rl_module_spec=module_spec)
     cfg["num_racers"] = num_racers
