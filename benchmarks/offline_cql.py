@@ -34,7 +34,8 @@ ASOR_BASE = {"lambda_": 0.1, "rho_value": 0.5, "rho_count": 0.5, "proxy": "rnd",
 
 
 def cql_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace) -> Any:
-    """CQL as in tuned_examples/offline/cql-hopper.yaml, on `args.quality` of every dynamics."""
+    """CQL as in tuned_examples/offline/cql-hopper.yaml (batch and sampled actions from the
+    flags), on `args.quality` of every dynamics."""
     from ray.rllib.algorithms.cql import CQLConfig
 
     import rllib_asor
@@ -46,7 +47,8 @@ def cql_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
         .env_runners(num_env_runners=0)
         .learners(num_learners=0)
         .training(
-            train_batch_size_per_learner=256,
+            train_batch_size_per_learner=args.batch,
+            num_actions=args.num_actions,
             lr=None,
             actor_lr=1e-4,
             critic_lr=3e-4,
@@ -87,6 +89,8 @@ def run_one(method: str, seed: int, asor: dict[str, Any] | None, args: argparse.
         "seed": seed,
         "quality": args.quality,
         "updates": args.iters * args.iter_updates,
+        "batch": args.batch,
+        "num_actions": args.num_actions,
         "wall_s": wall,
         "eval": ev,
         "asor_last": {k: float(v) for k, v in result.get("asor", {}).items() if np.isscalar(v)},
@@ -147,6 +151,14 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--iters", type=int, default=20, help="training iterations per run")
     p.add_argument("--iter-updates", type=int, default=100, help="gradient updates per iteration")
     p.add_argument("--bc-iters", type=int, default=20, help="CQL's behaviour-cloning updates")
+    p.add_argument("--batch", type=int, default=256, help="train batch (transitions)")
+    p.add_argument(
+        "--num-actions",
+        type=int,
+        default=10,
+        help="actions CQL samples per state for its conservative term (RLlib default 10; "
+        "each costs a twin-critic pass over the batch: the update's main cost on a CPU)",
+    )
     p.add_argument("--eval-episodes", type=int, default=3, help="episodes per dynamics")
     p.add_argument("--out", default="benchmarks/out/offline_cql")
     p.add_argument("--summarize-only", action="store_true")
