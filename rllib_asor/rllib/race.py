@@ -72,10 +72,20 @@ def make_single_race_env(env_config: Mapping[str, Any] | None = None) -> gym.Env
 
 
 class RaceParallelPettingZooEnv(ParallelPettingZooEnv):
-    """RLlib's ParallelPettingZooEnv; `render()` without the mode PettingZoo's signature lacks."""
+    """RLlib's ParallelPettingZooEnv; `render()` without the mode PettingZoo's signature lacks,
+    and the race's map choice forwarded."""
 
     def render(self) -> Any:
         return self.par_env.render()
+
+    @property
+    def map_choice(self) -> Any:
+        """The PettingZoo env's map choice (see `game_env` `set_map_choice`)."""
+        return self.par_env.map_choice
+
+    def set_map_choice(self, map_id: Any) -> None:
+        """Forwarded to the PettingZoo env, so curricula reach it through vector envs."""
+        self.par_env.set_map_choice(map_id)
 
 
 def make_multi_race_env(env_config: Mapping[str, Any] | None = None) -> RaceParallelPettingZooEnv:

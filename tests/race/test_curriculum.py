@@ -84,22 +84,24 @@ def test_max_env_steps_moves_on_without_episodes():
     assert isinstance(cb, MapCurriculumCallback)
 
 
-def test_ppo_run_moves_the_envs_to_the_next_stage(ray_session):
+@pytest.mark.parametrize("num_racers", [1, 2], ids=["single", "multi"])
+def test_ppo_run_moves_the_envs_to_the_next_stage(ray_session, num_racers):
     from rllib_asor.rllib.race import RaceMetricsCallback, race_ppo_config
 
     cur = {"stages": [[2], 3], "metric": "goal_reward", "threshold": -1.0, "min_episodes": 1}
+    envs = 2 if num_racers == 1 else 1
     config = (
-        race_ppo_config(1, None, max_episode_steps=20, curriculum=cur)
-        .env_runners(num_env_runners=0, num_envs_per_env_runner=2)
+        race_ppo_config(num_racers, None, max_episode_steps=20, curriculum=cur)
+        .env_runners(num_env_runners=0, num_envs_per_env_runner=envs)
         .training(train_batch_size=128, minibatch_size=64, num_epochs=1)
     )
     assert config.callbacks_class[0] is RaceMetricsCallback
     algo = config.build_algo()
     try:
-        vec = algo.env_runner.env.unwrapped
-        assert vec.call("map_choice") == (2, 2)
+        vec = algo.env_runner.env.unwrapped  # a vector env in both cases
+        assert vec.call("map_choice") == (2,) * envs
         stages = [algo.train()["race"]["curriculum_stage"] for _ in range(2)]
         assert stages == [0, 1]
-        assert vec.call("map_choice") == (3, 3)
+        assert vec.call("map_choice") == (3,) * envs
     finally:
         algo.stop()
