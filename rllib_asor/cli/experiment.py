@@ -422,9 +422,9 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
 
             cfg.callbacks(RaceMetricsCallback)
         if curriculum is not None:
-            existing = cfg.callbacks_class
-            existing = list(existing) if isinstance(existing, list | tuple) else [existing]
-            cfg.callbacks([*existing, curriculum])
+            from rllib_asor.rllib.callbacks import add_callbacks
+
+            add_callbacks(cfg, curriculum)
     return cfg
 
 

@@ -28,6 +28,7 @@ from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
 from ray.rllib.policy.policy import PolicySpec
 
 from rllib_asor.models.race_net import RaceNetModule
+from rllib_asor.rllib.callbacks import add_callbacks
 from rllib_asor.rllib.curriculum import MapCurriculum, map_curriculum_callback
 
 SINGLE_ENV = "game_env/ObstacleRace-v0"
@@ -224,12 +225,11 @@ def race_ppo_config(
     if max_episode_steps is not None:
         cfg["max_episode_steps"] = max_episode_steps
     module_spec = RLModuleSpec(module_class=RaceNetModule, model_config=dict(model_config or {}))
-    callbacks: list[type] = [RaceMetricsCallback]
+    config = PPOConfig().callbacks(RaceMetricsCallback)
     if curriculum is not None:
         if not isinstance(curriculum, MapCurriculum):
             curriculum = MapCurriculum.from_dict(curriculum)
-        callbacks.append(map_curriculum_callback(curriculum))
-    config = PPOConfig().callbacks(callbacks if len(callbacks) > 1 else callbacks[0])
+        add_callbacks(config, map_curriculum_callback(curriculum))
     if num_racers == 1:
         return config.environment(SINGLE_ENV, env_config=cfg).rl_module(rl_module_spec=module_spec)
     cfg["num_racers"] = num_racers

@@ -20,7 +20,7 @@ from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
 from rllib_asor.asor.config import AsorConfig
-from rllib_asor.rllib.callbacks import AsorMetricsCallback
+from rllib_asor.rllib.callbacks import AsorMetricsCallback, add_callbacks
 from rllib_asor.rllib.envs import register_with_tune
 from rllib_asor.rllib.learners import (
     AsorCQLTorchLearner,
@@ -80,7 +80,7 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
         learner_class=learner_class,
         learner_config_dict={**(config.learner_config_dict or {}), "asor": asor_dict},
     )
-    config.callbacks(callbacks_class=_with_callback(config.callbacks_class))
+    add_callbacks(config, AsorMetricsCallback)
     if config.is_multi_agent and config.policies_to_train is not None:
         config.multi_agent(policies_to_train=_AlsoTrainAux(config.policies_to_train))
     return config
@@ -144,16 +144,3 @@ def _module_spec(config: AlgorithmConfig, asor: AsorConfig) -> AsorMultiRLModule
                 **spaces,
             )
     return AsorMultiRLModuleSpec(rl_module_specs=specs)
-
-
-def _with_callback(existing: Any) -> list[type]:
-    if existing is None:
-        classes: list[type] = []
-    elif isinstance(existing, list | tuple):
-        classes = list(existing)
-    else:
-        classes = [existing]
-    from ray.rllib.callbacks.callbacks import RLlibCallback
-
-    classes = [c for c in classes if c is not RLlibCallback and c is not AsorMetricsCallback]
-    return [*classes, AsorMetricsCallback]
