@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,23 @@ def write_json(path: Path, data: Any) -> None:
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(data))
     os.replace(tmp, path)
+
+
+def run_if_missing(path: Path, label: str, run: Callable[[], dict[str, Any]]) -> None:
+    """One sequential benchmark run: skipped when its run file exists (a rerun resumes where
+    it stopped), else `run()`, its result written atomically to `path`, progress printed."""
+    if path.exists():
+        return
+    print(f"run {label}", flush=True)
+    res = run()
+    write_json(path, res)
+    print(f"  eval {res['eval']} wall {res['wall_s']:.0f}s", flush=True)
+
+
+def mean_std(xs: Sequence[float]) -> str:
+    """Table cell "mean ± std" (sample std over runs; 0 for a single run), one decimal."""
+    sd = float(np.std(xs, ddof=1)) if len(xs) > 1 else 0.0
+    return f"{np.mean(xs):.1f} ± {sd:.1f}"
 
 
 def bootstrap_ci(x: np.ndarray) -> tuple[float, float]:

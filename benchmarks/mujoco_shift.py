@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import start_local_ray, write_json
+from benchmarks.common import mean_std, run_if_missing, start_local_ray
 
 DEFAULT_METHODS = ("sac", "srpo:mode=srpo", "asor:mode=asor")
 EVAL_DYNAMICS = ("original", "body_mass", "density_10")
@@ -190,7 +190,6 @@ def summarize(out: Path) -> str:
     keys = sorted({(r["task"], r["method"]) for r in runs}, key=lambda k: (k[0], _order(k[1])))
     for task, method in keys:
         rs = [r for r in runs if r["task"] == task and r["method"] == method]
-        cell = lambda xs: f"{np.mean(xs):.1f} ± {np.std(xs, ddof=1) if len(xs) > 1 else 0.0:.1f}"  # noqa: E731
         per = {d: [r["eval"][d]["return"] for r in rs] for d in EVAL_DYNAMICS}
         means = [r["eval_mean"] for r in rs]
         table[f"{task}/{method}"] = {
@@ -202,8 +201,8 @@ def summarize(out: Path) -> str:
         }
         lines.append(
             f"| {task} | {method} | {len(rs)} | {int(np.mean([r['steps'] for r in rs]))} | "
-            + " | ".join(cell(per[d]) for d in EVAL_DYNAMICS)
-            + f" | {cell(means)} | {np.nanmean([r['train_return_last'] for r in rs]):.1f}"
+            + " | ".join(mean_std(per[d]) for d in EVAL_DYNAMICS)
+            + f" | {mean_std(means)} | {np.nanmean([r['train_return_last'] for r in rs]):.1f}"
             + f" | {np.mean([r['wall_s'] for r in rs]):.0f} |"
         )
     md = "\n".join(lines) + "\n"
@@ -247,13 +246,11 @@ def main(argv: list[str] | None = None) -> None:
             for task in args.tasks:
                 for text in args.methods:
                     name, asor = parse_method(text)
-                    path = out / "runs" / f"{task}-{name}-{seed}.json"
-                    if path.exists():
-                        continue
-                    print(f"run {task} {name} seed {seed}", flush=True)
-                    res = run_one(task, name, seed, asor, args)
-                    write_json(path, res)
-                    print(f"  eval {res['eval']} wall {res['wall_s']:.0f}s", flush=True)
+                    run_if_missing(
+                        out / "runs" / f"{task}-{name}-{seed}.json",
+                        f"{task} {name} seed {seed}",
+                        lambda: run_one(task, name, seed, asor, args),  # noqa: B023 (called at once)
+                    )
         ray.shutdown()
     print(summarize(out))
 

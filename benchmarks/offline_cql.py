@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import start_local_ray, write_json
+from benchmarks.common import mean_std, run_if_missing, start_local_ray
 from benchmarks.mujoco_shift import parse_method
 
 DEFAULT_METHODS = ("cql", "srpo:mode=srpo", "asor:mode=asor")
@@ -112,9 +112,6 @@ def summarize(out: Path) -> str:
     for quality, method in keys:
         rs = [r for r in runs if r["quality"] == quality and r["method"] == method]
 
-        def cell(xs: list[float]) -> str:
-            return f"{np.mean(xs):.1f} ± {np.std(xs, ddof=1) if len(xs) > 1 else 0.0:.1f}"
-
         per = {d: [r["eval"][d]["normalized_score"] for r in rs] for d in dyns}
         means = [r["eval"]["mean"]["normalized_score"] for r in rs]
         returns = [r["eval"]["mean"]["return_mean"] for r in rs]
@@ -126,8 +123,8 @@ def summarize(out: Path) -> str:
         }
         lines.append(
             f"| {quality} | {method} | {len(rs)} | {rs[0]['updates']} | "
-            + " | ".join(cell(per[d]) for d in dyns)
-            + f" | {cell(means)} | {cell(returns)} | {np.mean([r['wall_s'] for r in rs]):.0f} |"
+            + " | ".join(mean_std(per[d]) for d in dyns)
+            + f" | {mean_std(means)} | {mean_std(returns)} | {np.mean([r['wall_s'] for r in rs]):.0f} |"
         )
     md = "\n".join(lines) + "\n"
     (out / "table.md").write_text(md)
@@ -177,13 +174,11 @@ def main(argv: list[str] | None = None) -> None:
         for seed in range(args.first_seed, args.first_seed + args.seeds):
             for text in args.methods:
                 name, asor = parse_method(text, plain="cql", base=ASOR_BASE)
-                path = out / "runs" / f"{args.quality}-{name}-{seed}.json"
-                if path.exists():
-                    continue
-                print(f"run {args.quality} {name} seed {seed}", flush=True)
-                res = run_one(name, seed, asor, args)
-                write_json(path, res)
-                print(f"  eval {res['eval']['mean']} wall {res['wall_s']:.0f}s", flush=True)
+                run_if_missing(
+                    out / "runs" / f"{args.quality}-{name}-{seed}.json",
+                    f"{args.quality} {name} seed {seed}",
+                    lambda: run_one(name, seed, asor, args),  # noqa: B023 (called at once)
+                )
         ray.shutdown()
     print(summarize(out))
 

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import run_method_seed_grid, start_local_ray
+from benchmarks.common import run_method_seed_grid, start_local_ray, write_json
 from benchmarks.lava_reproduction import parse_method
 
 DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
@@ -160,13 +160,6 @@ def scripted_policy() -> Any:
     return act
 
 
-def _write(path: Path, data: dict[str, Any]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data))
-    os.replace(tmp, path)
-
-
 def run_one(config: dict[str, Any]) -> dict[str, Any]:
     """Tune function trainable: train one (method, seed) to the budget, then evaluate."""
     spec = config["spec"]
@@ -211,7 +204,7 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
         },
         "asor_last": {k: float(v) for k, v in result.get("asor", {}).items()},
     }
-    _write(Path(spec["out"]) / "runs" / f"{spec['method']}-{spec['seed']}.json", final)
+    write_json(Path(spec["out"]) / "runs" / f"{spec['method']}-{spec['seed']}.json", final)
     algo.stop()
     tune.report({"steps": steps, "done": True})
     return final
@@ -225,7 +218,7 @@ def reference_rows(out: Path, args: argparse.Namespace) -> None:
             continue
         t0 = time.time()
         ev = evaluate(make(), args.eval_episodes, args.max_episode_steps)
-        _write(path, {"method": name, "eval": ev, "eval_wall_s": time.time() - t0})
+        write_json(path, {"method": name, "eval": ev, "eval_wall_s": time.time() - t0})
 
 
 def _row(name: str, evs: list[dict[str, Any]], steps: str, n: str) -> tuple[str, dict[str, Any]]:

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import start_local_ray, write_json
+from benchmarks.common import run_if_missing, start_local_ray
 
 METHODS = {
     "ppo": None,
@@ -192,13 +192,11 @@ def main(argv: list[str] | None = None) -> None:
         (out / "runs").mkdir(parents=True, exist_ok=True)
         for seed in range(args.seeds):
             for method in args.methods:
-                path = out / "runs" / f"{method}-{seed}.json"
-                if path.exists():
-                    continue
-                print(f"run {method} seed {seed}", flush=True)
-                res = run_one(method, seed, args)
-                write_json(path, res)
-                print(f"  eval {res['eval']} wall {res['wall_s']:.0f}s", flush=True)
+                run_if_missing(
+                    out / "runs" / f"{method}-{seed}.json",
+                    f"{method} seed {seed}",
+                    lambda: run_one(method, seed, args),  # noqa: B023 (called at once)
+                )
         ray.shutdown()
     print(summarize(out, args.eval_densities))
 
