@@ -38,6 +38,11 @@ METRICS = ("success_rate", "goal_reward")
 """Per-map training metrics a stage can be judged by (``race/map_<m>/<metric>``)."""
 
 
+def _check_count(name: str, value: Any, alternative: str = "") -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"curriculum {name}={value!r} is not valid; allowed: an int >= 1{alternative}")
+
+
 @dataclasses.dataclass(frozen=True)
 class MapCurriculum:
     """Stages of map choices and the rule that moves from one to the next (module docstring)."""
@@ -74,15 +79,9 @@ class MapCurriculum:
                 f"curriculum threshold={self.threshold!r} is out of range for success_rate; "
                 "allowed: 0 < threshold <= 1"
             )
-        for name, low in (("min_episodes", 1), ("max_env_steps", 1)):
-            value = getattr(self, name)
-            if value is None and name == "max_env_steps":
-                continue
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(
-                    f"curriculum {name}={value!r} is not valid; allowed: an int >= {low}"
-                    + (" or null" if name == "max_env_steps" else "")
-                )
+        _check_count("min_episodes", self.min_episodes)
+        if self.max_env_steps is not None:
+            _check_count("max_env_steps", self.max_env_steps, " or null")
 
     @classmethod
     def from_dict(cls, block: Mapping[str, Any]) -> MapCurriculum:
@@ -114,8 +113,7 @@ def set_maps(env_runner: Any, choice: MapChoice) -> None:
     if hasattr(base, "num_envs") and hasattr(base, "call"):  # a gymnasium vector env
         base.call("set_map_choice", choice)
         return
-    base = getattr(base, "par_env", base)  # RLlib's PettingZoo wrapper
-    base.set_map_choice(choice)
+    base.set_map_choice(choice)  # a race env (RaceParallelPettingZooEnv forwards it)
 
 
 def map_curriculum_callback(curriculum: MapCurriculum) -> type[RLlibCallback]:
