@@ -54,6 +54,7 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
             num_racers=1,
             map_id=getattr(args, "train_map", None),
             max_episode_steps=args.max_episode_steps,
+            curriculum=json.loads(args.curriculum) if getattr(args, "curriculum", None) else None,
         )
         .env_runners(num_env_runners=0, num_envs_per_env_runner=args.envs)
         .training(
@@ -67,12 +68,6 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
         )
         .debugging(seed=seed)
     )
-    if getattr(args, "curriculum", None):
-        from rllib_asor.rllib.curriculum import MapCurriculum, map_curriculum_callback
-        from rllib_asor.rllib.race import RaceMetricsCallback
-
-        stages = MapCurriculum.from_dict(json.loads(args.curriculum))
-        config = config.callbacks([RaceMetricsCallback, map_curriculum_callback(stages)])
     if asor is not None:
         settings = {"seed": seed, "obs_keys": list(RACE_ASOR_OBS_KEYS)} | asor
         config = rllib_asor.with_asor(config, **settings)
