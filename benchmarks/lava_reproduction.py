@@ -10,6 +10,11 @@ Methods are named on the command line as `name:key=value,...` over AsorConfig fi
 (`ppo` = no ASOR), so the λ/ρ/form study uses the same script:
 
     python -m benchmarks.lava_reproduction --methods ppo asor:lambda_=0.003,reward_form=centered
+
+`asor:` (or `asor`) alone means the AsorConfig defaults. `--layout E` trains and evaluates on
+layout E (start (0,3)); keep each layout in its own `--out` (the run files are named
+`<method>-<seed>.json`, and the summary skips runs of another layout). Every run records
+`escaped_trap`: its greedy policy reaches the goal on the trap row (`TRAP_ROW`, row 2).
 """
 
 from __future__ import annotations
@@ -25,6 +30,8 @@ import numpy as np
 from benchmarks.common import bootstrap_ci, run_method_seed_grid, start_local_ray, write_json
 
 DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
+TRAP_ROW = 2
+"""The hardest lava row: the shortest route for rows 3-5 crosses its cells (PPO's known trap)."""
 
 
 def parse_method(text: str) -> tuple[str, dict[str, Any] | None]:
@@ -54,7 +61,10 @@ def ppo_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
 
     config = (
         PPOConfig()
-        .environment("rllib_asor/LavaWorld-v0", env_config={"obs_mode": "onehot"})
+        .environment(
+            "rllib_asor/LavaWorld-v0",
+            env_config={"obs_mode": "onehot", "layout": getattr(args, "layout", "B")},
+        )
         .env_runners(num_env_runners=0, num_envs_per_env_runner=8)
         .training(
             lr=args.lr,
@@ -73,7 +83,7 @@ def ppo_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
     return config
 
 
-def greedy_returns(module: Any, episodes: int = 3) -> dict[int, float]:
+def greedy_returns(module: Any, episodes: int = 3, layout: str = "B") -> dict[int, float]:
     """Mean return of the greedy policy on each lava row (deterministic env → few episodes)."""
     import torch
     from ray.rllib.core import Columns
@@ -82,7 +92,7 @@ def greedy_returns(module: Any, episodes: int = 3) -> dict[int, float]:
 
     out = {}
     for row in LAVA_ROWS:
-        env = LavaWorldEnv(lava_row=row)
+        env = LavaWorldEnv(lava_row=row, layout=layout)
         total = 0.0
         for ep in range(episodes):
             obs, _ = env.reset(seed=ep)
@@ -144,14 +154,17 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
                 **{f"asor_{k}": v for k, v in asor.items()},
             }
         )
-    rows = greedy_returns(algo.get_module())
+    layout = getattr(args, "layout", "B")
+    rows = greedy_returns(algo.get_module(), layout=layout)
     final = {
         "method": spec["method"],
         "seed": spec["seed"],
+        "layout": layout,
         "steps": steps,
         "wall_s": time.time() - t0,
         "greedy_return_per_row": rows,
         "greedy_return_mean": float(np.mean(list(rows.values()))),
+        "escaped_trap": bool(rows[TRAP_ROW] > 0),
         "train_return_last": float(np.nanmean([c[1] for c in curve[-3:]])),
         "curve": curve,
         "asor_last": {k: float(v) for k, v in result.get("asor", {}).items()},
@@ -169,16 +182,38 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
     return final
 
 
-def summarize(out: Path, methods: list[str]) -> str:
-    """Markdown table + PNGs from the per-run JSON files."""
+def escaped_trap(run: dict[str, Any]) -> bool:
+    """The run's `escaped_trap` (derived from its row-2 greedy return for older run files)."""
+    if "escaped_trap" in run:
+        return bool(run["escaped_trap"])
+    return run["greedy_return_per_row"][str(TRAP_ROW)] > 0
+
+
+def load_runs(out: Path, layout: str = "B") -> list[dict[str, Any]]:
+    """The run files under `out/runs` of `layout` (files without a layout are B); the others
+    are skipped with a warning."""
+    runs, other = [], []
+    for p in sorted((out / "runs").glob("*.json")):
+        run = json.loads(p.read_text())
+        if run.get("layout", "B") == layout:
+            runs.append(run)
+        else:
+            other.append(p.name)
+    if other:
+        print(f"warning: skipped {len(other)} runs not of layout {layout}: {', '.join(other)}")
+    return runs
+
+
+def summarize(out: Path, methods: list[str], layout: str = "B") -> str:
+    """Markdown table + PNGs from the per-run JSON files of `layout`."""
     from rllib_asor.envs.lava import LAVA_ROWS, optimal_return
 
-    runs = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*.json"))]
+    runs = load_runs(out, layout)
     lines = [
         "| method | n | greedy return, mean ± std | 95% bootstrap CI | "
         + " | ".join(f"row {r}" for r in LAVA_ROWS)
-        + " | train return (last) | env steps |",
-        "|---|---|---|---|" + "---|" * len(LAVA_ROWS) + "---|---|",
+        + " | escaped | train return (last) | env steps |",
+        "|---|---|---|---|" + "---|" * len(LAVA_ROWS) + "---|---|---|",
     ]
     table = {}
     for name in methods:
@@ -189,23 +224,27 @@ def summarize(out: Path, methods: list[str]) -> str:
         lo, hi = bootstrap_ci(g)
         per_row = [np.mean([r["greedy_return_per_row"][str(k)] for r in rs]) for k in LAVA_ROWS]
         train = np.mean([r["train_return_last"] for r in rs])
+        escaped = sum(escaped_trap(r) for r in rs)
         table[name] = {
             "n": len(rs),
             "mean": float(g.mean()),
             "std": float(g.std(ddof=1)) if len(g) > 1 else 0.0,
             "ci": [lo, hi],
             "per_row": per_row,
+            "escaped_trap": escaped,
         }
         lines.append(
-            f"| {name} | {len(rs)} | {g.mean():.3f} ± {table[name]['std']:.3f} | [{lo:.3f}, {hi:.3f}] | "
+            f"| {name} | {len(rs)} | {g.mean():.3f} ± {table[name]['std']:.3f} | "
+            f"[{lo:.3f}, {hi:.3f}] | "
             + " | ".join(f"{v:.3f}" for v in per_row)
-            + f" | {train:.3f} | {int(np.mean([r['steps'] for r in rs]))} |"
+            + f" | {escaped} / {len(rs)} | {train:.3f} | "
+            + f"{int(np.mean([r['steps'] for r in rs]))} |"
         )
+    optimum = [optimal_return(k, layout) for k in LAVA_ROWS]
     lines.append(
-        "| optimum (row known) | – | "
-        + f"{np.mean([optimal_return(k) for k in LAVA_ROWS]):.3f} | – | "
-        + " | ".join(f"{optimal_return(k):.3f}" for k in LAVA_ROWS)
-        + " | – | – |"
+        f"| optimum (row known) | – | {np.mean(optimum):.3f} | – | "
+        + " | ".join(f"{v:.3f}" for v in optimum)
+        + " | – | – | – |"
     )
     _plots(out, runs, methods)
     (out / "summary.json").write_text(json.dumps(table, indent=1))
@@ -266,6 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lr", type=float, default=5e-4)
     parser.add_argument("--entropy", type=float, default=0.01)
     parser.add_argument("--parallel", type=int, default=2, help="trials at once (1 CPU each)")
+    parser.add_argument("--layout", choices=("B", "E"), default="B", help="lava world layout")
     parser.add_argument("--out", default="benchmarks/out/lava")
     parser.add_argument("--summarize-only", action="store_true")
     args = parser.parse_args(argv)
@@ -273,11 +313,23 @@ def main(argv: list[str] | None = None) -> int:
     methods = [parse_method(m) for m in args.methods]
     names = [n for n, _ in methods]
     if not args.summarize_only:
-
+        seeds = range(args.first_seed, args.first_seed + args.seeds)
+        clash = [
+            p.name
+            for n in names
+            for s in seeds
+            if (p := out / "runs" / f"{n}-{s}.json").exists()
+            and json.loads(p.read_text()).get("layout", "B") != args.layout
+        ]
+        if clash:
+            parser.error(
+                f"{out}/runs holds runs of another layout ({', '.join(clash)}): use another --out"
+            )
         start_local_ray(args.parallel)
-        shared = {k: v for k, v in vars(args).items() if k in ("steps", "lr", "entropy")}
-        run_method_seed_grid(run_one, methods, range(args.first_seed, args.first_seed + args.seeds), shared, out)
-    md = summarize(out, names)
+        keys = ("steps", "lr", "entropy", "layout")
+        shared = {k: v for k, v in vars(args).items() if k in keys}
+        run_method_seed_grid(run_one, methods, seeds, shared, out)
+    md = summarize(out, names, args.layout)
     print(md)
     return 0
 

@@ -11,7 +11,10 @@ privileged, the expert) and a uniformly random policy.
 
 Methods are named as in `benchmarks.lava_reproduction` (`name:key=value,...` over AsorConfig
 fields; `ppo` = no ASOR). ASOR and SRPO see `RACE_ASOR_OBS_KEYS` unless `obs_keys` is given.
-Runs already written under OUT/runs are kept (a rerun only adds what is missing);
+Seeds are `--first-seed` .. `--first-seed + --seeds - 1`. Each run is written to
+OUT/runs/<method>-<seed>.json as soon as it finishes; existing run files are kept (a rerun
+only adds what is missing); the success rate is `eval.per_map.<map>.success` in them
+(`python -m benchmarks.compare --metric 'eval.per_map.*.success'` averages over the maps);
 `--summarize-only` rebuilds the tables.
 """
 
@@ -269,6 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
     parser.add_argument("--seeds", type=int, default=1)
+    parser.add_argument("--first-seed", type=int, default=0, help="seeds FIRST..FIRST+SEEDS-1")
     parser.add_argument("--steps", type=int, default=8192, help="env steps per run")
     parser.add_argument("--batch", type=int, default=1024, help="train batch (env steps)")
     parser.add_argument("--epochs", type=int, default=4)
@@ -297,7 +301,6 @@ def main(argv: list[str] | None = None) -> int:
     methods = [parse_method(m) for m in args.methods]
     names = [n for n, _ in methods]
     if not args.summarize_only:
-
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         t0 = time.time()
         reference_rows(out, args)
@@ -315,7 +318,9 @@ def main(argv: list[str] | None = None) -> int:
             "curriculum",
         )
         shared = {k: v for k, v in vars(args).items() if k in keys}
-        run_method_seed_grid(run_one, methods, range(args.seeds), shared, out)
+        run_method_seed_grid(
+            run_one, methods, range(args.first_seed, args.first_seed + args.seeds), shared, out
+        )
     md = summarize(out, names)
     print(md)
     return 0

@@ -1,0 +1,63 @@
+"""benchmarks.compare: bootstrap CI of Δ, one-sided Mann–Whitney p, and the table CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from benchmarks.compare import compare, main, metric_value
+
+
+def test_clearly_better_treatment() -> None:
+    c = compare([0.1, 0.2, 0.15, 0.12, 0.18], [0.8, 0.9, 0.85, 0.82, 0.88], n_resamples=999)
+    assert c["diff"] == pytest.approx(0.7)
+    assert 0 < c["ci_low"] <= c["diff"] <= c["ci_high"]
+    assert c["p_value"] < 0.05
+    assert c["n_baseline"] == c["n_treatment"] == 5
+
+
+def test_identical_constant_samples_are_degenerate_not_nan() -> None:
+    c = compare([0.635] * 5, [0.635] * 5)
+    assert c["diff"] == 0.0 and c["ci_low"] == 0.0 and c["ci_high"] == 0.0
+    assert c["p_value"] >= 0.5
+    assert c["std_baseline"] == 0.0
+    assert not any(math.isnan(v) for v in c.values())
+
+
+def test_one_constant_or_single_sample() -> None:
+    c = compare([0.5], [0.6, 0.7, 0.8], n_resamples=999)
+    assert 0.1 - 1e-9 <= c["ci_low"] <= c["ci_high"] <= 0.3 + 1e-9
+    c = compare([0.6, 0.7, 0.8], [0.5, 0.5, 0.5], n_resamples=999)
+    assert -0.3 - 1e-9 <= c["ci_low"] <= c["ci_high"] <= -0.1 + 1e-9
+    assert c["p_value"] > 0.5
+
+
+def test_metric_value_dotted_and_wildcard() -> None:
+    run = {"eval": {"per_map": {"0": {"success": 1.0}, "1": {"success": 0.0}}}, "ok": True}
+    assert metric_value(run, "eval.per_map.*.success") == 0.5
+    assert metric_value(run, "eval.per_map.1.success") == 0.0
+    assert metric_value(run, "ok") == 1.0
+
+
+def test_cli_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    runs = tmp_path / "lava" / "runs"
+    runs.mkdir(parents=True)
+    values = {"ppo": [0.6, 0.7, 0.65], "asor": [0.8, 0.85, 0.9], "asor-paper": [0.6, 0.6, 0.6]}
+    for method, vs in values.items():
+        for seed, v in enumerate(vs):
+            run = {"method": method, "seed": seed, "greedy_return_mean": v}
+            (runs / f"{method}-{seed}.json").write_text(json.dumps(run))
+    out = tmp_path / "table.md"
+    argv = ["--runs", str(tmp_path / "lava"), "--metric", "greedy_return_mean"]
+    assert (
+        main([*argv, "--baseline", "ppo", "--methods", "asor", "asor-paper", "--out", str(out)])
+        == 0
+    )
+    printed = capsys.readouterr().out
+    for name in ("ppo (baseline)", "| asor |", "| asor-paper |", "Mann–Whitney"):
+        assert name in printed
+    assert out.read_text() in printed
+    assert "nan" not in printed
