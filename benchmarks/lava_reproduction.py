@@ -113,6 +113,7 @@ def pseudo_counts(learner: Any) -> dict[int, list[list[float]]]:
     """RND count proxy −‖f̂ − f‖² per cell (NaN on lava) for every lava row."""
     import torch
 
+    from rllib_asor.asor.proxy import ProxyInputs
     from rllib_asor.envs.lava import GRID_SIZE, LAVA_ROWS, LavaWorldEnv, observation_at
 
     proxy = learner.module["asor_proxy.default_policy"]
@@ -121,7 +122,7 @@ def pseudo_counts(learner: Any) -> dict[int, list[list[float]]]:
         grid = np.full((GRID_SIZE, GRID_SIZE), np.nan)
         cells = LavaWorldEnv.cells(lava_row=row)
         obs = torch.as_tensor(np.stack([observation_at(r, c, row) for r, c in cells]))
-        counts = proxy.rnd.count_proxy(obs.float()).numpy()
+        counts = proxy.proxy.count(ProxyInputs(obs.float())).numpy()
         for (r, c), v in zip(cells, counts, strict=True):
             grid[r, c] = v
         grids[row] = grid.tolist()

@@ -7,7 +7,9 @@ the value and what is allowed.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import difflib
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -15,10 +17,55 @@ from typing import Any
 
 MODES = ("asor", "srpo", "count", "random")
 PROXIES = ("rnd", "ensemble", "rnd_per_dynamics")
-REWARD_FORMS = ("log", "centered", "gail")
-ALGORITHMS = ("PPO", "APPO", "IMPALA", "SAC", "CQL")
+REWARD_FORMS = ("log", "centered", "gail", "logit")
+REAL_SOURCES = ("batch", "archive")
+SHAPINGS = ("direct", "potential")
+PRESET_NAMES = ("robust", "paper")
+
+PRESETS: dict[str, dict[str, Any]] = {
+    # The default: a bounded, two-signed, normalised bonus scaled to the env reward, a
+    # discriminator that does not saturate, D_P drawn from an archive of the best episodes
+    # per dynamics, and no bonus until the critic ranks states (docs/algorithm.md).
+    "robust": {
+        "lambda_": 0.05,
+        "lambda_relative": True,
+        "lambda_warmup": True,
+        "reward_form": "logit",
+        "bonus_norm": True,
+        "real_source": "archive",
+        "disc_lr": 3e-4,
+        "disc_grad_penalty": 5.0,
+        "disc_logit_reg": 0.01,
+        "disc_weight_decay": 1e-4,
+        "disc_input_norm": True,
+    },
+    # The paper as stated: λ·log ω on the current batch's partition, a fixed absolute λ.
+    "paper": {
+        "lambda_": 0.01,
+        "lambda_relative": False,
+        "lambda_warmup": False,
+        "reward_form": "log",
+        "bonus_norm": False,
+        "real_source": "batch",
+        "disc_lr": 1e-3,
+        "disc_grad_penalty": 0.0,
+        "disc_logit_reg": 0.0,
+        "disc_weight_decay": 0.0,
+        "disc_input_norm": False,
+    },
+}
+"""Values of the preset-dependent fields; a field given explicitly always wins."""
 
 LambdaSpec = float | str | list[list[float]]
+
+
+def effective_rhos(rho_value: float, rho_count: float, mode: str) -> tuple[float, float]:
+    """(ρ1, ρ2) as the partition uses them for `mode` (srpo: ρ2 = 1, count: ρ1 = 1)."""
+    if mode == "srpo":
+        return rho_value, 1.0
+    if mode == "count":
+        return 1.0, rho_count
+    return rho_value, rho_count
 
 
 def _fail(key: str, value: Any, allowed: str) -> None:
@@ -27,12 +74,40 @@ def _fail(key: str, value: Any, allowed: str) -> None:
 
 @dataclass
 class AsorConfig:
-    """Hyperparameters of ASOR (see ALGORITHM.md); defaults chosen by measurement (docs/results.md)."""
+    """Hyperparameters of ASOR (docs/algorithm.md); defaults chosen by measurement (docs/results.md).
 
-    lambda_: LambdaSpec = 0.01
-    """λ, weight of log ω(s) in the reward: a float ≥ 0, a piecewise-linear schedule
+    `preset` fills every field left at None: "robust" (the default) or "paper" (the method as
+    the paper states it, for reproduction). Fields given explicitly override the preset.
+    """
+
+    preset: str = "robust"
+    """robust (default: bounded, normalised, archive-based) | paper (λ·log ω on the batch)."""
+    lambda_: LambdaSpec | None = None
+    """λ, weight of the bonus b(s) in the reward: a float ≥ 0, a piecewise-linear schedule
     `[[timestep, value], ...]` (like RLlib's lr schedules), or "auto" (dual ascent on the
-    discriminator's Jensen-Shannon estimate; our extension, not in the paper)."""
+    discriminator's Jensen-Shannon estimate; our extension, not in the paper).
+    robust: 0.05 (× the env reward's running scale); paper: 0.01 (absolute)."""
+    lambda_relative: bool | None = None
+    """Multiply λ by the env reward's running RMS, so one λ means the same on every env."""
+    lambda_warmup: bool | None = None
+    """Add no bonus until the critic ranks states (explained variance of V > 0 on a batch)."""
+    reward_form: str | None = None
+    """log: log ω (paper, ≤ 0); centered: log ω minus its batch mean; gail: −log(1 − ω) ≥ 0;
+    logit: the discriminator logit clipped to ±`logit_clip` (AIRL/DAC form, two-signed)."""
+    bonus_norm: bool | None = None
+    """Centre the bonus by its running mean, divide by its running std, clip to ±`bonus_clip`."""
+    shaping: str = "direct"
+    """direct: r + λ·b(s); potential: r + λ·(γ·b(s′) − b(s)) (Ng et al. 1999: the optimal
+    policy cannot change; b(s′) = 0 after termination)."""
+    bonus_clip: float = 3.0
+    """Bound of the normalised bonus: |λ·b| ≤ λ·bonus_clip (× reward scale when relative)."""
+    logit_clip: float = 5.0
+    """Bound of the logit form's raw bonus."""
+    real_source: str | None = None
+    """Where D_P ("real") comes from: batch (paper: partition of the current batch) or
+    archive (the states of the highest-return episodes so far, per dynamics)."""
+    archive_size: int = 2048
+    """States kept per dynamics bucket by the archive (real_source="archive")."""
     rho_value: float = 0.5
     """ρ1 ∈ (0, 1]: fraction of the batch with the highest V(s) that forms P."""
     rho_count: float = 0.5
@@ -49,8 +124,16 @@ class AsorConfig:
     """Lower clip of log ω (and of the gail bonus's sign-flipped counterpart), < 0."""
     disc_hiddens: list[int] = field(default_factory=lambda: [256, 256, 256])
     """Discriminator MLP hidden sizes (SRPO: 3×256 ReLU)."""
-    disc_lr: float = 1e-3
-    """Adam learning rate of the discriminator."""
+    disc_lr: float | None = None
+    """Adam learning rate of the discriminator (robust 3e-4, paper 1e-3)."""
+    disc_grad_penalty: float | None = None
+    """Weight of the gradient penalty ‖∇ₛ logit‖² on real samples (AMP/ASE: 5-10)."""
+    disc_logit_reg: float | None = None
+    """Weight of the squared output-layer weights (ASE's logit regularisation)."""
+    disc_weight_decay: float | None = None
+    """Adam weight decay of the discriminator."""
+    disc_input_norm: bool | None = None
+    """Normalise the discriminator's inputs by running mean/std (clipped ±5)."""
     label_smoothing: float = 0.0
     """Targets 1−ε / ε for real / generated; > 0 keeps ω from saturating (LAVA_STUDY.md)."""
     aux_epochs: int = 1
@@ -64,7 +147,7 @@ class AsorConfig:
     rnd_lr: float = 1e-3
     """Adam learning rate of the RND predictor (or the dynamics ensemble)."""
     dynamics_buckets: int = 8
-    """Predictors of `rnd_per_dynamics` (dynamics ids are taken modulo this)."""
+    """Predictors of `rnd_per_dynamics` and buckets of the archive (dynamics ids modulo this)."""
     ensemble_size: int = 5
     """K, the number of dynamics models when proxy == "ensemble"."""
     lambda_target: float = 0.1
@@ -81,6 +164,11 @@ class AsorConfig:
     """Seed for the random partition mode and the aux networks' initialisation."""
 
     def __post_init__(self) -> None:
+        if self.preset not in PRESETS:
+            _fail("preset", self.preset, " | ".join(PRESET_NAMES))
+        for key, value in PRESETS[self.preset].items():
+            if getattr(self, key) is None:
+                setattr(self, key, copy.deepcopy(value))
         self.validate()
 
     # ------------------------------------------------------------------ validation
@@ -91,15 +179,28 @@ class AsorConfig:
             v = getattr(self, key)
             if not _is_number(v) or not 0.0 < v <= 1.0:
                 _fail(key, v, "a number in (0, 1]")
-        for key, allowed in (("mode", MODES), ("proxy", PROXIES), ("reward_form", REWARD_FORMS)):
+        for key, allowed in (
+            ("mode", MODES),
+            ("proxy", PROXIES),
+            ("reward_form", REWARD_FORMS),
+            ("real_source", REAL_SOURCES),
+            ("shaping", SHAPINGS),
+        ):
             if getattr(self, key) not in allowed:
                 _fail(key, getattr(self, key), " | ".join(allowed))
         if not _is_number(self.log_omega_min) or not -1e6 < self.log_omega_min < 0:
             _fail("log_omega_min", self.log_omega_min, "a finite number < 0")
-        for key in ("disc_lr", "rnd_lr", "lambda_lr"):
+        for key in ("disc_lr", "rnd_lr", "lambda_lr", "bonus_clip", "logit_clip"):
             v = getattr(self, key)
             if not _is_number(v) or v <= 0:
                 _fail(key, v, "a number > 0")
+        for key in ("disc_grad_penalty", "disc_logit_reg", "disc_weight_decay"):
+            v = getattr(self, key)
+            if not _is_number(v) or v < 0:
+                _fail(key, v, "a finite number ≥ 0")
+        for key in ("lambda_relative", "lambda_warmup", "bonus_norm", "disc_input_norm"):
+            if not isinstance(getattr(self, key), bool):
+                _fail(key, getattr(self, key), "true or false")
         if not _is_number(self.label_smoothing) or not 0.0 <= self.label_smoothing < 0.5:
             _fail("label_smoothing", self.label_smoothing, "a number in [0, 0.5)")
         for key in ("disc_hiddens", "rnd_hiddens"):
@@ -112,7 +213,13 @@ class AsorConfig:
             ):
                 _fail(key, v, "a non-empty list of positive integers")
             setattr(self, key, list(v))
-        for key in ("rnd_embedding_dim", "ensemble_size", "aux_epochs", "dynamics_buckets"):
+        for key in (
+            "rnd_embedding_dim",
+            "ensemble_size",
+            "aux_epochs",
+            "dynamics_buckets",
+            "archive_size",
+        ):
             v = getattr(self, key)
             if (
                 not isinstance(v, int)
@@ -187,9 +294,13 @@ class AsorConfig:
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(settings) - known)
         if unknown:
+            hints = [
+                f"{key!r} (did you mean {close[0]!r}?)" if close else repr(key)
+                for key in unknown
+                for close in [difflib.get_close_matches(key, known, n=1)]
+            ]
             raise ValueError(
-                f"asor: unknown key(s) {', '.join(map(repr, unknown))}; allowed: "
-                + ", ".join(sorted(known))
+                f"asor: unknown key(s) {', '.join(hints)}; allowed: " + ", ".join(sorted(known))
             )
         return cls(**settings)
 
@@ -201,11 +312,7 @@ class AsorConfig:
     @property
     def effective_rhos(self) -> tuple[float, float]:
         """(ρ1, ρ2) as the partition uses them for this mode (srpo: ρ2 = 1, count: ρ1 = 1)."""
-        if self.mode == "srpo":
-            return self.rho_value, 1.0
-        if self.mode == "count":
-            return 1.0, self.rho_count
-        return self.rho_value, self.rho_count
+        return effective_rhos(self.rho_value, self.rho_count, self.mode)
 
     @property
     def needs_proxy(self) -> bool:

@@ -9,21 +9,51 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from rllib_asor.asor.networks import mlp
+from rllib_asor.asor.networks import RunningMeanStd, mlp
 
 LOG2 = math.log(2.0)
 
 
 class Discriminator(nn.Module):
-    """MLP that returns one logit per state (SRPO: 3×256 ReLU)."""
+    """MLP that returns one logit per state (SRPO: 3×256 ReLU), optionally on inputs
+    normalised by a running mean/std (updated with `observe`, clipped to ±5)."""
 
-    def __init__(self, in_dim: int, hiddens: Sequence[int] = (256, 256, 256)) -> None:
+    def __init__(
+        self, in_dim: int, hiddens: Sequence[int] = (256, 256, 256), input_norm: bool = False
+    ) -> None:
         super().__init__()
         self.net = mlp(in_dim, hiddens, 1)
+        self.input_rms = RunningMeanStd(in_dim) if input_norm else None
+
+    def normalize(self, x: torch.Tensor) -> torch.Tensor:
+        """The network's input for raw features x."""
+        return x if self.input_rms is None else self.input_rms.normalize(x)
+
+    @torch.no_grad()
+    def observe(self, x: torch.Tensor) -> None:
+        """Fold raw features into the input normaliser (no-op without one)."""
+        if self.input_rms is not None:
+            self.input_rms.update(x)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """Logits, shape [N]."""
-        return self.net(x).squeeze(-1)
+        return self.net(self.normalize(x)).squeeze(-1)
+
+    def regularizer(
+        self, real: torch.Tensor, grad_penalty: float, logit_reg: float
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """grad_penalty·E‖∇ logit(s)‖² on real samples (w.r.t. the normalised input; AMP/ASE)
+        plus logit_reg·‖W_out‖² (ASE's logit regularisation)."""
+        zero = torch.zeros((), device=real.device)
+        gp = zero
+        if grad_penalty > 0 and real.shape[0] > 0:
+            z = self.normalize(real).detach().requires_grad_(True)
+            (grad,) = torch.autograd.grad(self.net(z).sum(), z, create_graph=True)
+            gp = grad.pow(2).sum(-1).mean()
+        out_w = self.net[-1].weight
+        lr = out_w.pow(2).sum() if logit_reg > 0 else zero
+        loss = grad_penalty * gp + logit_reg * lr
+        return loss, {"disc_grad_penalty": gp.detach(), "disc_logit_norm": out_w.detach().norm()}
 
 
 def discriminator_loss(

@@ -12,14 +12,14 @@ from typing import TypeVar
 import numpy as np
 import torch
 
-from rllib_asor.asor.config import MODES
+from rllib_asor.asor.config import MODES, effective_rhos
 
 ArrayT = TypeVar("ArrayT", np.ndarray, torch.Tensor)
 
 
 def real_set_size(n: int, rho_value: float, rho_count: float, mode: str = "asor") -> int:
     """|D_P| for a batch of n states: ⌈ρ2·⌈ρ1·n⌉⌉ with the mode's effective ρs."""
-    r1, r2 = _effective_rhos(rho_value, rho_count, mode)
+    r1, r2 = effective_rhos(rho_value, rho_count, mode)
     return math.ceil(r2 * math.ceil(r1 * n)) if n > 0 else 0
 
 
@@ -62,7 +62,7 @@ def partition(
 
     mask = np.zeros(n, dtype=bool)
     if n > 0:
-        r1, r2 = _effective_rhos(rho_value, rho_count, mode)
+        r1, r2 = effective_rhos(rho_value, rho_count, mode)
         if mode == "random":
             size = real_set_size(n, rho_value, rho_count, mode)
             chosen = _random_generator(rng).choice(n, size=size, replace=False)
@@ -77,14 +77,6 @@ def partition(
     if is_torch:
         return torch.from_numpy(mask).to(values.device)
     return mask
-
-
-def _effective_rhos(rho_value: float, rho_count: float, mode: str) -> tuple[float, float]:
-    if mode == "srpo":
-        return rho_value, 1.0
-    if mode == "count":
-        return 1.0, rho_count
-    return rho_value, rho_count
 
 
 def _top_k(x: np.ndarray, k: int) -> np.ndarray:

@@ -16,11 +16,12 @@ ASOR_METRICS = frozenset(
     {
         # discriminator update (rllib_asor.asor.discriminator.discriminator_loss)
         "disc_loss", "disc_acc_real", "disc_acc_fake", "disc_bce_real", "disc_bce_fake",
-        "disc_entropy", "js_estimate",
-        # reward augmentation (AsorRewardConnector)
-        "lambda", "real_fraction", "aug_reward_mean", "aug_reward_min", "aug_reward_max",
-        "bonus_mean", "env_reward_mean", "value_mean", "value_real_mean", "omega_real_mean",
-        "omega_generated_mean",
+        "disc_entropy", "js_estimate", "disc_grad_penalty", "disc_logit_norm",
+        # reward augmentation (rllib_asor.asor.update)
+        "lambda", "reward_scale", "real_fraction", "aug_reward_mean", "aug_reward_min",
+        "aug_reward_max", "aug_reward_abs_mean", "bonus_share", "bonus_mean", "env_reward_mean",
+        "value_mean", "value_real_mean", "omega_batch_mean", "omega_real_mean",
+        "omega_generated_mean", "archive_states", "critic_ev", "active",
         # proxies
         "rnd_loss", "ensemble_loss",
     }

@@ -5,14 +5,11 @@ Where it must sit: after `NumpyToTensor` and before the advantage / TD-target co
 (ALGORITHM.md, Alg. 1 lines 10-11). It sees torch tensors, one dummy step per episode
 (`Columns.LOSS_MASK` False, left untouched) and, for stateful modules, `[B, T]` padding.
 
-Per trained policy it
-1. takes V(s) from the policy's critic and c(s) from the proxy module (after folding the batch
-   into the proxy's normalisers),
-2. partitions the valid steps into D_P / D_Q (`rllib_asor.asor.partition`),
-3. adds λ·b(s) to the rewards, with b from the discriminator *before* this update's
-   discriminator step (the connector runs before the Learner's gradient steps),
-4. writes the discriminator's and the proxy's own batches (features + labels), so the Learner
-   trains them in the same update.
+Per trained policy it turns the batch into an `AsorBatch` (flat features of the valid steps,
+V(s) from the policy's critic, the episode chunks), runs `rllib_asor.asor.update.asor_update`
+(the algorithm's steps, in order), adds its λ·b(s) to the rewards — b from the discriminator
+*before* this update's discriminator step — and writes the discriminator's and the proxy's
+own batches, so the Learner trains them in the same update.
 """
 
 from __future__ import annotations
@@ -25,14 +22,14 @@ import numpy as np
 import torch
 import tree
 from ray.rllib.connectors.connector_v2 import ConnectorV2
+from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 
 from rllib_asor.asor.config import AsorConfig
-from rllib_asor.asor.discriminator import discriminator_loss
 from rllib_asor.asor.encoding import flatten, select, select_space
-from rllib_asor.asor.partition import partition
-from rllib_asor.asor.reward import dual_ascent_step, reward_bonus, scheduled_lambda
-from rllib_asor.rllib.modules import ACTION_FEATURES, DYNAMICS_ID, LABEL
+from rllib_asor.asor.proxy import ProxyInputs
+from rllib_asor.asor.update import AsorBatch, Chunk, asor_update
+from rllib_asor.rllib.modules import DYNAMICS_ID, LABEL, proxy_batch
 
 ValueFn = Callable[[Any, dict[str, Any]], torch.Tensor]
 
@@ -86,6 +83,7 @@ class AsorRewardConnector(ConnectorV2):
         aux_ids: dict[str, AuxModuleIds],
         timestep_fn: Callable[[], float] = lambda: 0.0,
         value_fn: ValueFn = critic_values,
+        gamma: float = 0.99,
         **kwargs: Any,
     ) -> None:
         super().__init__(input_observation_space, input_action_space, **kwargs)
@@ -93,6 +91,7 @@ class AsorRewardConnector(ConnectorV2):
         self.aux_ids = dict(aux_ids)
         self.timestep_fn = timestep_fn
         self.value_fn = value_fn
+        self.gamma = float(gamma)
         self._rng = np.random.default_rng(asor.seed)
         self.aux_batch_sizes: dict[str, int] = {}
         """Rows of each aux module's batch from the last call (the Learner caps passes)."""
@@ -108,30 +107,38 @@ class AsorRewardConnector(ConnectorV2):
     ) -> Any:
         for policy_id, ids in self.aux_ids.items():
             if policy_id in batch:
-                self._augment(rl_module, batch, policy_id, ids, metrics)
+                self._augment(rl_module, batch, policy_id, ids, episodes, metrics)
         return batch
 
     # ------------------------------------------------------------------------------------
     def _augment(
-        self, rl_module: Any, batch: dict, policy_id: str, ids: AuxModuleIds, metrics: Any
+        self,
+        rl_module: Any,
+        batch: dict,
+        policy_id: str,
+        ids: AuxModuleIds,
+        episodes: Any,
+        metrics: Any,
     ) -> None:
         cfg = self.asor
         pb = batch[policy_id]
         policy = rl_module[policy_id].unwrapped()
         rewards = pb[Columns.REWARDS]
         lead, n = rewards.shape, rewards.numel()
-        valid = pb.get(Columns.LOSS_MASK)
+        mask = pb.get(Columns.LOSS_MASK)
         valid = (
             torch.ones(n, dtype=torch.bool, device=rewards.device)
-            if valid is None
-            else valid.reshape(-1).bool()
+            if mask is None
+            else mask.reshape(-1).bool()
         )
+        rows = valid.nonzero().squeeze(-1)
 
-        def flat_valid(x: Any) -> Any:
-            return tree.map_structure(lambda t: t.reshape(n, *t.shape[len(lead) :])[valid], x)
+        def flat(x: Any) -> Any:
+            return tree.map_structure(lambda t: t.reshape(n, *t.shape[len(lead) :]), x)
 
         space = select_space(policy.observation_space, cfg.obs_keys)
-        features = flatten(select(flat_valid(pb[Columns.OBS]), cfg.obs_keys), space)
+        all_features = flatten(select(flat(pb[Columns.OBS]), cfg.obs_keys), space)
+        features = all_features[rows]
         if not torch.isfinite(features).all():
             bad = (~torch.isfinite(features)).any(-1).sum().item()
             raise ValueError(
@@ -139,92 +146,76 @@ class AsorRewardConnector(ConnectorV2):
                 "the reward augmentation needs finite observations (check the env)"
             )
         with torch.no_grad():
-            values = self.value_fn(policy, pb).reshape(-1)[valid].float()
+            all_values = self.value_fn(policy, pb).reshape(-1).float()
+        terminateds = pb.get(Columns.TERMINATEDS)
+        terminateds = None if terminateds is None else flat(terminateds).bool()
 
-        proxy_batch: dict[str, Any] = {Columns.OBS: features}
-        counts = None
-        if ids.proxy is not None:
-            proxy = rl_module[ids.proxy].unwrapped()
-            actions = next_features = None
-            if cfg.proxy == "ensemble":
-                actions = flatten(flat_valid(pb[Columns.ACTIONS]), policy.action_space)
-                next_features = flatten(
-                    select(flat_valid(pb[Columns.NEXT_OBS]), cfg.obs_keys), space
-                )
-                proxy_batch.update({ACTION_FEATURES: actions, Columns.NEXT_OBS: next_features})
-            dynamics_ids = None
-            if cfg.proxy == "rnd_per_dynamics":
-                dynamics_ids = flat_valid(pb[DYNAMICS_ID]).long()
-                proxy_batch[DYNAMICS_ID] = dynamics_ids
-            counts = proxy.update_and_count(features, actions, next_features, dynamics_ids)
+        proxy_in = ProxyInputs(features)
+        if cfg.needs_proxy and cfg.proxy == "ensemble":
+            proxy_in.actions = flatten(flat(pb[Columns.ACTIONS])[rows], policy.action_space)
+            proxy_in.next_features = flatten(
+                select(flat(pb[Columns.NEXT_OBS]), cfg.obs_keys), space
+            )[rows]
+        if cfg.needs_proxy and cfg.proxy == "rnd_per_dynamics":
+            proxy_in.dynamics_ids = flat(pb[DYNAMICS_ID])[rows].long()
 
-        rho_value, rho_count = cfg.effective_rhos
-        real = partition(values, counts, rho_value, rho_count, mode=cfg.mode, rng=self._rng)
-
-        disc = rl_module[ids.disc].unwrapped()
-        with torch.no_grad():
-            logits = disc.logits(features)
-            bonus = reward_bonus(logits, cfg.reward_form, cfg.log_omega_min)
-            _, disc_stats = discriminator_loss(logits, real.float())
-        lam = self._current_lambda(disc, disc_stats["js_estimate"].item())
+        asor_batch = AsorBatch(
+            features=features,
+            env_rewards=rewards.reshape(-1)[rows],
+            values=all_values[rows],
+            gamma=self.gamma,
+            timestep=self.timestep_fn(),
+            proxy_inputs=proxy_in,
+            terminateds=None if terminateds is None else terminateds[rows],
+        )
+        if Columns.NEXT_OBS in pb:  # off-policy: each row is a transition
+            asor_batch.next_features = flatten(
+                select(flat(pb[Columns.NEXT_OBS]), cfg.obs_keys), space
+            )[rows]
+        elif mask is not None and len(lead) == 1:
+            # On-policy: each chunk ends with a bootstrap row (loss mask False) holding s_T.
+            chunks = self._chunks(episodes, policy_id, valid)
+            if chunks is not None:
+                nxt = rows + 1
+                asor_batch.next_features = all_features[nxt]
+                asor_batch.next_values = all_values[nxt]
+                asor_batch.chunks = chunks
+        state = rl_module[ids.disc].unwrapped().state
+        proxy = rl_module[ids.proxy].unwrapped().proxy if ids.proxy is not None else None
+        result = asor_update(cfg, state, proxy, asor_batch, self._rng)
 
         added = torch.zeros(n, dtype=rewards.dtype, device=rewards.device)
-        added[valid] = (lam * bonus).to(rewards.dtype)
+        added[rows] = result.reward_delta.to(rewards.dtype)
         pb[Columns.REWARDS] = rewards + added.reshape(lead)
         if not torch.isfinite(pb[Columns.REWARDS]).all():
             raise ValueError(
                 f"ASOR: rewards of policy {policy_id!r} are NaN/inf after augmentation"
             )
-
-        batch[ids.disc] = {Columns.OBS: features, LABEL: real.float()}
-        self.aux_batch_sizes[ids.disc] = features.shape[0]
+        batch[ids.disc] = {Columns.OBS: result.disc_features, LABEL: result.disc_labels}
+        self.aux_batch_sizes[ids.disc] = result.disc_features.shape[0]
         if ids.proxy is not None:
-            batch[ids.proxy] = proxy_batch
+            batch[ids.proxy] = proxy_batch(proxy_in)
             self.aux_batch_sizes[ids.proxy] = features.shape[0]
-        if metrics is not None:
-            self._log(
-                metrics, ids.disc, lam, bonus, real, values, rewards.reshape(-1)[valid], logits
-            )
+        if metrics is not None and result.metrics:
+            metrics.log_dict(result.metrics, key=ids.disc, window=1)
 
-    def _current_lambda(self, disc: Any, js_estimate: float) -> float:
-        """λ for this batch; with "auto", one dual-ascent step on this batch's JS estimate."""
-        cfg = self.asor
-        if cfg.lambda_ != "auto":
-            return scheduled_lambda(cfg.lambda_, self.timestep_fn())
-        lam = float(disc.auto_lambda.item())
-        disc.auto_lambda.fill_(
-            dual_ascent_step(lam, js_estimate, cfg.lambda_target, cfg.lambda_lr, cfg.lambda_max)
-        )
-        return lam
-
-    @staticmethod
-    def _log(
-        metrics: Any,
-        key: str,
-        lam: float,
-        bonus: torch.Tensor,
-        real: torch.Tensor,
-        values: torch.Tensor,
-        env_rewards: torch.Tensor,
-        logits: torch.Tensor,
-    ) -> None:
-        if bonus.numel() == 0:
-            return
-        aug = lam * bonus
-        omega = torch.sigmoid(logits)
-        stats = {
-            "lambda": lam,
-            "real_fraction": float(real.float().mean()),
-            "aug_reward_mean": float(aug.mean()),
-            "aug_reward_min": float(aug.min()),
-            "aug_reward_max": float(aug.max()),
-            "bonus_mean": float(bonus.mean()),
-            "env_reward_mean": float(env_rewards.float().mean()),
-            "value_mean": float(values.mean()),
-        }
-        if real.any():
-            stats["omega_real_mean"] = float(omega[real].mean())
-            stats["value_real_mean"] = float(values[real].mean())
-        if not real.all():
-            stats["omega_generated_mean"] = float(omega[~real].mean())
-        metrics.log_dict(stats, key=key, window=1)
+    def _chunks(self, episodes: Any, policy_id: str, valid: torch.Tensor) -> list[Chunk] | None:
+        """The batch's episode chunks of `policy_id` in row order (valid-row indices), or None
+        when the rows cannot be matched to the episodes (then no archive, no warm-up EV)."""
+        if episodes is None:
+            return None
+        chunks, row, start = [], 0, 0
+        for ep in self.single_agent_episode_iterator(episodes, agents_that_stepped_only=False):
+            if (ep.module_id or DEFAULT_MODULE_ID) != policy_id:
+                continue
+            length = len(ep)  # real steps + the bootstrap row
+            dyn = int(ep.get_infos(0).get("dynamics_id", 0))
+            # RLlib suffixes the learner's copy of the id with "_<i>" per batch; strip it so
+            # the chunks of one episode share a key across batches.
+            key = (ep.id_.rsplit("_", 1)[0], ep.agent_id)
+            chunks.append(Chunk(key, start, start + length - 1, dyn))
+            row += length
+            start += length - 1
+        if row != valid.numel() or start != int(valid.sum()):
+            return None
+        return chunks

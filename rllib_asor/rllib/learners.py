@@ -111,7 +111,7 @@ class AsorLearnerMixin:
 
     def asor_connector_kwargs(self) -> dict[str, Any]:
         """Extra keyword arguments for the connector (e.g. a `value_fn` for off-policy)."""
-        return {"value_fn": critic_values}
+        return {"value_fn": critic_values, "gamma": self.config.gamma}
 
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
         super().before_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
@@ -140,11 +140,14 @@ class AsorLearnerMixin:
         if not is_aux_module(module_id):
             return super().configure_optimizers_for_module(module_id, config)  # type: ignore[misc]
         asor = AsorConfig.from_dict(self.config.learner_config_dict.get("asor"))
-        lr = asor.disc_lr if module_id.startswith(DISC_PREFIX) else asor.rnd_lr
+        is_disc = module_id.startswith(DISC_PREFIX)
+        lr = asor.disc_lr if is_disc else asor.rnd_lr
         params = [p for p in self._module[module_id].parameters() if p.requires_grad]
         self.register_optimizer(
             module_id=module_id,
-            optimizer=torch.optim.Adam(params),
+            optimizer=torch.optim.Adam(
+                params, weight_decay=asor.disc_weight_decay if is_disc else 0.0
+            ),
             params=params,
             lr_or_lr_schedule=lr,
         )
@@ -175,7 +178,7 @@ class _SoftQAsorMixin(AsorLearnerMixin):
     asor_insert_before = None  # after NumpyToTensor, at the end of the pipeline (no GAE)
 
     def asor_connector_kwargs(self) -> dict[str, Any]:
-        return {"value_fn": soft_q_state_values}
+        return {"value_fn": soft_q_state_values, "gamma": self.config.gamma}
 
     def compute_losses(self, *, fwd_out: dict[str, Any], batch: dict[str, Any]) -> dict[str, Any]:
         losses = super().compute_losses(fwd_out=fwd_out, batch=batch)  # type: ignore[misc]

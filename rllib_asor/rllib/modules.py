@@ -5,8 +5,8 @@ Both are `learner_only` (never built on env runners) and bring their own loss th
 flat float features that the ASOR connector piece prepares (`Columns.OBS` = the flattened,
 key-selected observation), so they work for any observation space.
 
-Running statistics (RND's observation normaliser, λ for `lambda_="auto"`) live in buffers:
-they are part of the module state and survive checkpoint/restore.
+Running statistics (normalisers, the archive, λ for `lambda_="auto"`) live in buffers: they
+are part of the module state and survive checkpoint/restore.
 """
 
 from __future__ import annotations
@@ -23,8 +23,8 @@ from ray.rllib.core.rl_module.torch import TorchRLModule
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.discriminator import Discriminator, discriminator_loss
 from rllib_asor.asor.encoding import flat_dim, select_space
-from rllib_asor.asor.ensemble import DynamicsEnsemble
-from rllib_asor.asor.rnd import RND, PerDynamicsRND
+from rllib_asor.asor.proxy import ProxyInputs, make_proxy
+from rllib_asor.asor.update import AsorState
 
 LABEL = "asor_label"
 ACTION_FEATURES = "asor_action"
@@ -56,93 +56,80 @@ class _LearnerOnlyModule(TorchRLModule, SelfSupervisedLossAPI):
 
 
 class AsorDiscriminatorModule(_LearnerOnlyModule):
-    """ω(s) = σ(f(s)); trained with the class-balanced GAN loss on D_P (1) vs D_Q (0)."""
+    """ω(s) = σ(f(s)) and the rest of ASOR's state (`rllib_asor.asor.update.AsorState`:
+    normalisers, archive, λ); trained with the class-balanced GAN loss on D_P (1) vs D_Q (0)
+    plus the gradient penalty and logit regularisation."""
 
     def setup(self) -> None:
         super().setup()
         with _seeded(self.asor.seed):
-            self.disc = Discriminator(self.feature_dim, self.asor.disc_hiddens)
-        init = self.asor.lambda_init if self.asor.lambda_ == "auto" else 0.0
-        self.register_buffer("auto_lambda", torch.tensor(float(init)))
+            self.state = AsorState(self.asor, self.feature_dim)
+
+    @property
+    def disc(self) -> Discriminator:
+        """The discriminator network."""
+        return self.state.disc
 
     def logits(self, features: torch.Tensor) -> torch.Tensor:
         """Discriminator logits for flat features [N, D] → [N]."""
-        return self.disc(features)
+        return self.state.disc(features)
 
     def _forward_train(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
-        return {"logits": self.disc(batch[Columns.OBS])}
+        return {"logits": self.state.disc(batch[Columns.OBS])}
 
     def compute_self_supervised_loss(
         self, *, learner: Any, module_id: str, config: Any, batch: dict, fwd_out: dict, **kw: Any
     ) -> torch.Tensor:
-        loss, stats = discriminator_loss(fwd_out["logits"], batch[LABEL], self.asor.label_smoothing)
+        labels = batch[LABEL]
+        loss, stats = discriminator_loss(fwd_out["logits"], labels, self.asor.label_smoothing)
+        reg, reg_stats = self.state.disc.regularizer(
+            batch[Columns.OBS][labels > 0.5], self.asor.disc_grad_penalty, self.asor.disc_logit_reg
+        )
+        stats = {**stats, **reg_stats}
         learner.metrics.log_dict({k: v.item() for k, v in stats.items()}, key=module_id, window=1)
-        return loss
+        return loss + reg
 
 
 class AsorProxyModule(_LearnerOnlyModule):
-    """The visitation-count proxy c(s): RND (`proxy="rnd"`) or a dynamics ensemble."""
+    """The visitation-count proxy c(s) (`rllib_asor.asor.proxy`: rnd, ensemble,
+    rnd_per_dynamics), trained on the proxy batch the connector writes."""
 
     def setup(self) -> None:
         super().setup()
         seed = None if self.asor.seed is None else self.asor.seed + 1
         with _seeded(seed):
-            if self.asor.proxy == "rnd":
-                self.rnd = RND(
-                    self.feature_dim, self.asor.rnd_hiddens, self.asor.rnd_embedding_dim, seed
-                )
-            elif self.asor.proxy == "rnd_per_dynamics":
-                self.rnd = PerDynamicsRND(
-                    self.feature_dim,
-                    self.asor.rnd_hiddens,
-                    self.asor.rnd_embedding_dim,
-                    self.asor.dynamics_buckets,
-                    seed,
-                )
-            else:
-                self.ensemble = DynamicsEnsemble(
-                    self.feature_dim,
-                    flat_dim(self.action_space),
-                    self.asor.ensemble_size,
-                    self.asor.rnd_hiddens,
-                )
-
-    @torch.no_grad()
-    def update_and_count(
-        self,
-        features: torch.Tensor,
-        actions: torch.Tensor | None = None,
-        next_features: torch.Tensor | None = None,
-        dynamics_ids: torch.Tensor | None = None,
-    ) -> torch.Tensor:
-        """Fold the batch into the normalisers, then return c(s) (higher = visited more)."""
-        if self.asor.proxy == "rnd":
-            self.rnd.update_normalizer(features)
-            return self.rnd.count_proxy(features)
-        if self.asor.proxy == "rnd_per_dynamics":
-            self.rnd.update(features, dynamics_ids)
-            return self.rnd.count_proxy(features)
-        self.ensemble.update_normalizers(features, next_features)
-        return self.ensemble.count_proxy(features, actions)
+            self.proxy = make_proxy(self.asor, self.feature_dim, flat_dim(self.action_space), seed)
 
     def _forward_train(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
-        if self.asor.proxy == "rnd":
-            return {"rnd_error": self.rnd.prediction_error(batch[Columns.OBS])}
-        if self.asor.proxy == "rnd_per_dynamics":
-            return {"rnd_error": self.rnd.prediction_error(batch[Columns.OBS], batch[DYNAMICS_ID])}
-        return {
-            "ensemble_loss": self.ensemble.loss(
-                batch[Columns.OBS], batch[ACTION_FEATURES], batch[Columns.NEXT_OBS]
-            )
-        }
+        return {"proxy_loss": self.proxy.loss(proxy_inputs(batch))}
 
     def compute_self_supervised_loss(
         self, *, learner: Any, module_id: str, config: Any, batch: dict, fwd_out: dict, **kw: Any
     ) -> torch.Tensor:
-        if "rnd_error" in fwd_out:
-            loss = fwd_out["rnd_error"].mean()
-            learner.metrics.log_value((module_id, "rnd_loss"), loss.item(), window=1)
-        else:
-            loss = fwd_out["ensemble_loss"]
-            learner.metrics.log_value((module_id, "ensemble_loss"), loss.item(), window=1)
+        loss = fwd_out["proxy_loss"]
+        name = "ensemble_loss" if self.asor.proxy == "ensemble" else "rnd_loss"
+        learner.metrics.log_value((module_id, name), loss.item(), window=1)
         return loss
+
+
+def proxy_batch(x: ProxyInputs) -> dict[str, torch.Tensor]:
+    """The proxy module's train batch for `x` (the inverse of `proxy_inputs`)."""
+    out = {Columns.OBS: x.features}
+    for key, value in (
+        (ACTION_FEATURES, x.actions),
+        (Columns.NEXT_OBS, x.next_features),
+        (DYNAMICS_ID, x.dynamics_ids),
+    ):
+        if value is not None:
+            out[key] = value
+    return out
+
+
+def proxy_inputs(batch: dict[str, Any]) -> ProxyInputs:
+    """`ProxyInputs` from a proxy train batch."""
+    return ProxyInputs(
+        batch[Columns.OBS],
+        batch.get(ACTION_FEATURES),
+        batch.get(Columns.NEXT_OBS),
+        batch.get(DYNAMICS_ID),
+    )

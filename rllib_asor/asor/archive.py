@@ -1,0 +1,147 @@
+"""A persistent archive of the states of the highest-return episodes, per dynamics.
+
+ASOR's "real" set D_P is drawn from here instead of from the current on-policy batch (the
+pattern of generative adversarial self-imitation, Guo et al. 2018): the current batch is
+"generated", and the discriminator learns what the best episodes seen so far under *every*
+dynamics have in common. Each dynamics bucket (`dynamics_id` modulo the bucket count; one
+bucket when the env reports none) keeps up to `capacity` states; when full, the states of the
+lowest-return episodes go first, and among equal returns the oldest.
+
+Episodes reach the learner in chunks; `add_chunk` accumulates them by episode key and an
+episode enters the archive when it terminates or when it stops arriving (truncated by the env
+at a chunk boundary). The stored tensors are buffers, so the archive survives checkpoints; the
+open, unfinished episodes do not (at most one batch of chunks is lost on restore).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable
+from dataclasses import dataclass, field
+
+import torch
+from torch import nn
+
+
+@dataclass
+class _OpenEpisode:
+    features: list[torch.Tensor] = field(default_factory=list)
+    rewards: list[torch.Tensor] = field(default_factory=list)
+    dynamics_id: int = 0
+    seen_in_call: int = 0
+
+
+class StateArchive(nn.Module):
+    """Top-return episodes' states per dynamics bucket, with each state's return-to-go."""
+
+    def __init__(self, feature_dim: int, capacity: int = 2048, buckets: int = 8) -> None:
+        super().__init__()
+        self.capacity, self.buckets = int(capacity), int(buckets)
+        self.register_buffer("features", torch.zeros(buckets, capacity, feature_dim))
+        self.register_buffer("returns", torch.full((buckets, capacity), -torch.inf))
+        self.register_buffer("return_to_go", torch.zeros(buckets, capacity))
+        self.register_buffer("stamp", torch.zeros(buckets, capacity))
+        self.register_buffer("size", torch.zeros(buckets))
+        self.register_buffer("episodes_added", torch.zeros(()))
+        self._open: dict[Hashable, _OpenEpisode] = {}
+        self._calls = 0
+
+    # ------------------------------------------------------------------ filling
+    def add_chunk(
+        self,
+        key: Hashable,
+        features: torch.Tensor,
+        rewards: torch.Tensor,
+        dynamics_id: int,
+        terminated: bool,
+        gamma: float,
+    ) -> None:
+        """Append one chunk of an episode; a terminated episode is archived at once."""
+        ep = self._open.setdefault(key, _OpenEpisode(dynamics_id=int(dynamics_id)))
+        ep.features.append(features.detach().float().cpu())
+        ep.rewards.append(rewards.detach().float().cpu())
+        ep.seen_in_call = self._calls
+        if terminated:
+            self._close(key, gamma)
+
+    def end_call(self, gamma: float) -> None:
+        """Archive the open episodes that received no chunk since the last `end_call`
+        (the env truncated them); call once per batch, after all `add_chunk`s."""
+        for key in [k for k, ep in self._open.items() if ep.seen_in_call < self._calls]:
+            self._close(key, gamma)
+        self._calls += 1
+
+    def _close(self, key: Hashable, gamma: float) -> None:
+        ep = self._open.pop(key)
+        feats, rewards = torch.cat(ep.features), torch.cat(ep.rewards)
+        if len(rewards) == 0:
+            return
+        rtg = discounted_return_to_go(rewards, gamma)
+        self.insert(feats, rtg, float(rewards.sum()), ep.dynamics_id)
+
+    @torch.no_grad()
+    def insert(
+        self,
+        features: torch.Tensor,
+        return_to_go: torch.Tensor,
+        episode_return: float,
+        dynamics_id: int,
+    ) -> None:
+        """Insert one whole episode; keep the bucket's `capacity` best states."""
+        b = int(dynamics_id) % self.buckets
+        n = int(self.size[b])
+        self.episodes_added += 1
+        feats = torch.cat([self.features[b, :n], features.to(self.features)])
+        rets = torch.cat([self.returns[b, :n], torch.full((len(features),), float(episode_return))])
+        rtg = torch.cat([self.return_to_go[b, :n], return_to_go.to(self.return_to_go)])
+        stamp = torch.cat(
+            [self.stamp[b, :n], torch.full((len(features),), float(self.episodes_added))]
+        )
+        # Highest episode return first; among equal returns the newest first.
+        order = torch.argsort(stamp, descending=True, stable=True)
+        order = order[torch.argsort(rets[order], descending=True, stable=True)][: self.capacity]
+        k = len(order)
+        self.features[b, :k], self.returns[b, :k] = feats[order], rets[order]
+        self.return_to_go[b, :k], self.stamp[b, :k] = rtg[order], stamp[order]
+        self.returns[b, k:] = -torch.inf
+        self.size[b] = k
+
+    # ------------------------------------------------------------------ reading
+    def __len__(self) -> int:
+        return int(self.size.sum())
+
+    @property
+    def open_episodes(self) -> int:
+        """Episodes with chunks received but not yet archived."""
+        return len(self._open)
+
+    def sample(
+        self, n: int, generator: torch.Generator | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Up to n (features, return-to-go) drawn evenly over the non-empty buckets,
+        without replacement inside a bucket."""
+        filled = [b for b in range(self.buckets) if self.size[b] > 0]
+        if not filled or n <= 0:
+            dim = self.features.shape[-1]
+            return torch.zeros(0, dim), torch.zeros(0)
+        per = -(-n // len(filled))
+        feats, rtg = [], []
+        for b in filled:
+            size = int(self.size[b])
+            idx = torch.randperm(size, generator=generator)[: min(per, size)]
+            feats.append(self.features[b, idx])
+            rtg.append(self.return_to_go[b, idx])
+        return torch.cat(feats), torch.cat(rtg)
+
+    def bucket_sizes(self) -> list[int]:
+        """States stored per bucket."""
+        return [int(s) for s in self.size]
+
+
+def discounted_return_to_go(rewards: torch.Tensor, gamma: float) -> torch.Tensor:
+    """G_t = Σ_k γ^k r_{t+k} within one episode, shape like `rewards`."""
+    out = torch.empty_like(rewards, dtype=torch.float32)
+    running = 0.0
+    for t in range(len(rewards) - 1, -1, -1):
+        running = float(rewards[t]) + gamma * running
+        out[t] = running
+    return out

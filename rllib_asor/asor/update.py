@@ -1,0 +1,278 @@
+"""One ASOR update on one policy's train batch, in the order of the paper's Algorithm 1.
+
+Plain torch, no RLlib: the PPO connector piece, the SAC and CQL glue all build an
+`AsorBatch` and call `asor_update`, then let their Learner train the discriminator and the
+proxy on the batches it returns (the rewards use ω from *before* that training step).
+
+    1. V(s): given, from the algorithm's own critic (no gradient)
+    2. c(s): the visitation proxy folds the batch in and counts it
+    3. D_P:  partition by value, then by count; from the current batch (paper) or from the
+             archive of the best episodes per dynamics (robust default)
+    4. ω(s): the discriminator's logits on the batch, before its own update
+    5. b(s): the bonus form, normalised by its running statistics, optionally shaped
+    6. λ:    schedule / auto, × the env reward's running scale, 0 during the warm-up
+    7. r ← r + λ·b(s)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from rllib_asor.asor.archive import StateArchive
+from rllib_asor.asor.config import AsorConfig
+from rllib_asor.asor.discriminator import Discriminator, discriminator_loss
+from rllib_asor.asor.networks import RunningMeanStd
+from rllib_asor.asor.partition import partition
+from rllib_asor.asor.proxy import ProxyInputs, VisitationProxy
+from rllib_asor.asor.reward import (
+    dual_ascent_step,
+    explained_variance,
+    normalize_bonus,
+    potential_shaping,
+    reward_bonus,
+    reward_scale,
+    scheduled_lambda,
+)
+
+
+class AsorState(nn.Module):
+    """Everything ASOR keeps between updates, as one module (all of it checkpointed):
+    the discriminator, the running normalisers of the bonus and of the env reward, the
+    archive (real_source="archive"), λ of `lambda_="auto"` and the warm-up latch."""
+
+    def __init__(self, cfg: AsorConfig, feature_dim: int) -> None:
+        super().__init__()
+        self.disc = Discriminator(feature_dim, cfg.disc_hiddens, cfg.disc_input_norm)
+        self.bonus_rms = RunningMeanStd(1)
+        self.reward_rms = RunningMeanStd(1)
+        self.archive = (
+            StateArchive(feature_dim, cfg.archive_size, cfg.dynamics_buckets)
+            if cfg.real_source == "archive"
+            else None
+        )
+        init = cfg.lambda_init if cfg.lambda_ == "auto" else 0.0
+        self.register_buffer("auto_lambda", torch.tensor(float(init)))
+        self.register_buffer("critic_ready", torch.tensor(0.0 if cfg.lambda_warmup else 1.0))
+
+
+@dataclass
+class Chunk:
+    """One episode chunk of the batch: rows [start, stop) of the valid steps."""
+
+    key: Hashable
+    start: int
+    stop: int
+    dynamics_id: int = 0
+
+
+@dataclass
+class AsorBatch:
+    """One policy's valid steps (N rows) and what the optional steps need."""
+
+    features: torch.Tensor
+    """[N, D] flat features of s (the key-selected observation)."""
+    env_rewards: torch.Tensor
+    """[N] the env's rewards."""
+    values: torch.Tensor
+    """[N] V(s) from the critic."""
+    gamma: float
+    timestep: float = 0.0
+    """Env steps sampled so far (λ schedules)."""
+    proxy_inputs: ProxyInputs | None = None
+    """Inputs of the proxy (None: `features` alone)."""
+    next_features: torch.Tensor | None = None
+    """[N, D] features of s′ (potential shaping)."""
+    terminateds: torch.Tensor | None = None
+    """[N] whether s′ is terminal."""
+    next_values: torch.Tensor | None = None
+    """[N] V(s′) (the critic's explained variance for the warm-up; on-policy only)."""
+    chunks: Sequence[Chunk] | None = None
+    """Episode chunks in row order (the archive and the warm-up; on-policy only)."""
+
+
+@dataclass
+class AsorResult:
+    """What the caller applies and trains."""
+
+    reward_delta: torch.Tensor
+    """[N] λ·b(s), to add to the env rewards."""
+    disc_features: torch.Tensor
+    """[M, D] the discriminator's train batch: D_P then D_Q."""
+    disc_labels: torch.Tensor
+    """[M] 1 for D_P, 0 for D_Q."""
+    metrics: dict[str, float] = field(default_factory=dict)
+
+
+@torch.no_grad()
+def asor_update(
+    cfg: AsorConfig,
+    state: AsorState,
+    proxy: VisitationProxy | None,
+    batch: AsorBatch,
+    rng: np.random.Generator,
+) -> AsorResult:
+    """Steps 1-7 of the module docstring for one policy's batch."""
+    feats, n = batch.features, batch.features.shape[0]
+    # 1. V(s): `batch.values`, from the algorithm's critic.
+    # 2. The visitation proxy observes the batch, then counts it.
+    counts = None
+    if proxy is not None:
+        proxy_in = batch.proxy_inputs or ProxyInputs(feats)
+        proxy.observe(proxy_in)
+        counts = proxy.count(proxy_in)
+    # 3. The real set D_P, and the discriminator's train batch.
+    rho_value, rho_count = cfg.effective_rhos
+    if state.archive is not None and batch.chunks is not None:
+        _archive_episodes(state.archive, batch)
+        cand, cand_rtg = state.archive.sample(n, _torch_generator(rng))
+        cand_counts = None
+        if proxy is not None and cfg.proxy != "ensemble" and len(cand):
+            cand_counts = proxy.count(ProxyInputs(cand, dynamics_ids=None))
+        mode = cfg.mode if cand_counts is not None or cfg.mode in ("srpo", "random") else "srpo"
+        real = (
+            partition(cand_rtg, cand_counts, rho_value, rho_count, mode=mode, rng=rng)
+            if len(cand)
+            else torch.zeros(0, dtype=torch.bool)
+        )
+        # Shuffled: the Learner cuts this batch into minibatches in row order.
+        order = torch.from_numpy(rng.permutation(int(real.sum()) + n))
+        disc_feats = torch.cat([cand[real].to(feats), feats])[order]
+        labels = torch.cat([torch.ones(int(real.sum())), torch.zeros(n)]).to(feats)[order]
+        batch_real = torch.zeros(n, dtype=torch.bool)
+    else:
+        # The paper (and off-policy/offline, whose replay batch already spans every
+        # dynamics seen): D_P is the top of the current batch.
+        batch_real = partition(batch.values, counts, rho_value, rho_count, mode=cfg.mode, rng=rng)
+        disc_feats, labels = feats, batch_real.float()
+    has_real = bool((labels > 0.5).any())
+    # 4. ω(s) on the batch, before this update's discriminator step.
+    state.disc.observe(disc_feats)
+    logits = state.disc(feats)
+    # 5. The bonus b(s).
+    bonus = _bonus(cfg, state, logits)
+    if cfg.shaping == "potential":
+        if batch.next_features is None or batch.terminateds is None:
+            raise ValueError("asor.shaping='potential' needs next observations and terminateds")
+        next_bonus = _bonus(cfg, state, state.disc(batch.next_features), update_stats=False)
+        bonus = potential_shaping(bonus, next_bonus, batch.terminateds, batch.gamma)
+    # 6. λ for this batch.
+    _, disc_stats = discriminator_loss(logits, batch_real.float())
+    lam = _lambda(cfg, state, disc_stats["js_estimate"].item(), batch.timestep)
+    state.reward_rms.update(batch.env_rewards.reshape(-1, 1).float())
+    scale = reward_scale(state.reward_rms) if cfg.lambda_relative else 1.0
+    ev = _critic_ev(batch)
+    if ev is not None and ev > 0.0:
+        state.critic_ready.fill_(1.0)
+    active = bool(state.critic_ready.item()) and has_real
+    lam_eff = lam * scale if active else 0.0
+    # 7. The amount added to the rewards.
+    delta = (lam_eff * bonus).to(batch.env_rewards.dtype)
+    if not torch.isfinite(delta).all():
+        raise ValueError("ASOR: the reward bonus is NaN/inf")
+    metrics = _metrics(cfg, state, lam_eff, scale, bonus, delta, logits, batch, batch_real, labels)
+    metrics.update({"critic_ev": ev if ev is not None else float("nan"), "active": float(active)})
+    return AsorResult(delta, disc_feats, labels, metrics)
+
+
+def _bonus(
+    cfg: AsorConfig, state: AsorState, logits: torch.Tensor, update_stats: bool = True
+) -> torch.Tensor:
+    bonus = reward_bonus(logits, cfg.reward_form, cfg.log_omega_min, cfg.logit_clip)
+    if not cfg.bonus_norm:
+        return bonus
+    if update_stats:
+        return normalize_bonus(bonus, state.bonus_rms, cfg.bonus_clip)
+    return state.bonus_rms.normalize(bonus.reshape(-1, 1), clip=cfg.bonus_clip).reshape(-1)
+
+
+def _lambda(cfg: AsorConfig, state: AsorState, js_estimate: float, timestep: float) -> float:
+    """λ before scaling; with "auto", one dual-ascent step on this batch's JS estimate."""
+    if cfg.lambda_ != "auto":
+        return scheduled_lambda(cfg.lambda_, timestep)
+    lam = float(state.auto_lambda.item())
+    state.auto_lambda.fill_(
+        dual_ascent_step(lam, js_estimate, cfg.lambda_target, cfg.lambda_lr, cfg.lambda_max)
+    )
+    return lam
+
+
+def _critic_ev(batch: AsorBatch) -> float | None:
+    """Explained variance of V(s) against the chunks' discounted returns (bootstrapped with
+    V at each chunk's end); None without chunk structure."""
+    if batch.chunks is None or batch.next_values is None or batch.terminateds is None:
+        return None
+    r = batch.env_rewards.double().tolist()
+    nv = batch.next_values.double().tolist()
+    term = batch.terminateds.bool().tolist()
+    targets = [0.0] * len(r)
+    for chunk in batch.chunks:
+        g = 0.0
+        for t in range(chunk.stop - 1, chunk.start - 1, -1):
+            nxt = nv[t] if t == chunk.stop - 1 else g
+            g = r[t] + batch.gamma * (0.0 if term[t] else nxt)
+            targets[t] = g
+    return explained_variance(batch.values.double(), torch.tensor(targets, dtype=torch.float64))
+
+
+def _archive_episodes(archive: StateArchive, batch: AsorBatch) -> None:
+    term = batch.terminateds
+    for chunk in batch.chunks or ():
+        archive.add_chunk(
+            chunk.key,
+            batch.features[chunk.start : chunk.stop],
+            batch.env_rewards[chunk.start : chunk.stop],
+            chunk.dynamics_id,
+            terminated=bool(term[chunk.stop - 1]) if term is not None else False,
+            gamma=batch.gamma,
+        )
+    archive.end_call(batch.gamma)
+
+
+def _torch_generator(rng: np.random.Generator) -> torch.Generator:
+    return torch.Generator().manual_seed(int(rng.integers(0, 2**31 - 1)))
+
+
+def _metrics(
+    cfg: AsorConfig,
+    state: AsorState,
+    lam: float,
+    scale: float,
+    bonus: torch.Tensor,
+    delta: torch.Tensor,
+    logits: torch.Tensor,
+    batch: AsorBatch,
+    batch_real: torch.Tensor,
+    labels: torch.Tensor,
+) -> dict[str, Any]:
+    if delta.numel() == 0:
+        return {}
+    omega = torch.sigmoid(logits)
+    env_r = batch.env_rewards.float()
+    stats: dict[str, Any] = {
+        "lambda": lam,
+        "reward_scale": scale,
+        "real_fraction": float(labels.mean()) if labels.numel() else 0.0,
+        "aug_reward_mean": float(delta.mean()),
+        "aug_reward_min": float(delta.min()),
+        "aug_reward_max": float(delta.max()),
+        "aug_reward_abs_mean": float(delta.abs().mean()),
+        "bonus_share": float(delta.abs().mean() / max(reward_scale(state.reward_rms), 1e-8)),
+        "bonus_mean": float(bonus.mean()),
+        "env_reward_mean": float(env_r.mean()),
+        "value_mean": float(batch.values.mean()),
+        "omega_batch_mean": float(omega.mean()),
+    }
+    if batch_real.any():
+        stats["omega_real_mean"] = float(omega[batch_real].mean())
+        stats["value_real_mean"] = float(batch.values[batch_real].mean())
+    if not batch_real.all():
+        stats["omega_generated_mean"] = float(omega[~batch_real].mean())
+    if state.archive is not None:
+        stats["archive_states"] = float(len(state.archive))
+    return stats
