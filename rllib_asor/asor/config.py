@@ -118,8 +118,6 @@ class AsorConfig:
     """Visitation-count proxy: rnd (Random Network Distillation), ensemble (disagreement), or
     rnd_per_dynamics (one RND predictor per dynamics id from `info["dynamics_id"]`; the count
     under the least familiar dynamics — our extension, see rllib_asor.asor.rnd)."""
-    reward_form: str = "log"
-    """log: λ·log ω (paper); centered: log ω minus its batch mean; gail: −log(1 − ω) ≥ 0."""
     log_omega_min: float = -5.0
     """Lower clip of log ω (and of the gail bonus's sign-flipped counterpart), < 0."""
     disc_hiddens: list[int] = field(default_factory=lambda: [256, 256, 256])

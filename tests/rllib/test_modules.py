@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from rllib_asor.asor.config import AsorConfig
+from rllib_asor.asor.proxy import ProxyInputs
 from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 
 OBS = gym.spaces.Dict(
@@ -39,7 +40,9 @@ def test_proxy_counts_are_finite_and_one_per_state(proxy):
     module = build(AsorProxyModule, proxy=proxy, obs_keys=["vec"])
     x = torch.randn(16, 5)
     actions = torch.nn.functional.one_hot(torch.randint(0, 2, (16,)), 5).float()
-    counts = module.update_and_count(x, actions, x + 0.1)
+    inputs = ProxyInputs(x, actions, x + 0.1)
+    module.proxy.observe(inputs)
+    counts = module.proxy.count(inputs)
     assert counts.shape == (16,) and torch.isfinite(counts).all()
 
 

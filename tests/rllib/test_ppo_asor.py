@@ -19,6 +19,7 @@ DISC, PROXY = "asor_disc.default_policy", "asor_proxy.default_policy"
 
 
 def lava_ppo(**asor):
+    """PPO+ASOR on the lava world; the paper preset unless `preset` says otherwise."""
     config = (
         PPOConfig()
         .environment("rllib_asor/LavaWorld-v0")
@@ -27,7 +28,10 @@ def lava_ppo(**asor):
         .rl_module(model_config={"fcnet_hiddens": [32, 32]})
         .debugging(seed=0)
     )
-    return rllib_asor.with_asor(config, **({"lambda_": 0.1, "seed": 0} | asor))
+    defaults = {"preset": "paper", "lambda_": 0.1, "seed": 0}
+    if asor.get("preset") == "robust":
+        defaults = {"seed": 0}
+    return rllib_asor.with_asor(config, **(defaults | asor))
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +60,7 @@ def test_with_asor_wires_learner_modules_and_settings(algo):
     assert not isinstance(algo.env_runner.module, MultiRLModule)
 
 
-def test_rewards_change_by_lambda_times_bonus(algo):
+def test_paper_preset_rewards_change_by_lambda_times_log_omega(algo):
     learner = algo.learner_group._learner
     episodes = sample_episodes(algo, 200)
     env_total = sum(float(np.sum(e.get_rewards())) for e in episodes)
@@ -73,7 +77,6 @@ def test_rewards_change_by_lambda_times_bonus(algo):
         logits = learner.module[DISC].logits(batch[DISC][Columns.OBS])
     expected = env_total + 0.1 * reward_bonus(logits).sum().item()
     assert pb[Columns.REWARDS][valid].sum().item() == pytest.approx(expected, rel=1e-4, abs=1e-4)
-    assert 0.1 * reward_bonus(logits).sum().item() < 0  # the log form is a penalty
     # The discriminator batch holds exactly the valid steps, ~ρ1ρ2 of them labelled real.
     assert batch[DISC][Columns.OBS].shape[0] == int(valid.sum())
     real_fraction = batch[DISC]["asor_label"].mean().item()
@@ -88,8 +91,9 @@ def test_two_iterations_train_aux_modules_and_report_metrics(algo):
     for mid in (DISC, PROXY):
         changed = [k for k in before[mid] if not torch.equal(before[mid][k], after[mid][k])]
         assert changed, f"{mid} did not change"
-    assert not torch.equal(before[PROXY]["rnd.obs_rms.count"], after[PROXY]["rnd.obs_rms.count"])
-    assert torch.equal(before[PROXY]["rnd.target.0.weight"], after[PROXY]["rnd.target.0.weight"])
+    count, target = "proxy.rnd.obs_rms.count", "proxy.rnd.target.0.weight"
+    assert not torch.equal(before[PROXY][count], after[PROXY][count])
+    assert torch.equal(before[PROXY][target], after[PROXY][target])
     asor = result["asor"]
     for key in (
         "disc_loss",
@@ -196,9 +200,63 @@ def test_rnd_per_dynamics_counts_with_the_envs_dynamics_ids(ray_session):
     algo = lava_ppo(proxy="rnd_per_dynamics", dynamics_buckets=8).build_algo()
     try:
         result = algo.train()
-        proxy = algo.learner_group._learner.module[PROXY].unwrapped().rnd
+        proxy = algo.learner_group._learner.module[PROXY].unwrapped().proxy.rnd
         # The lava rows 2..5 are the dynamics ids: exactly their buckets have been seen.
         assert torch.nonzero(proxy.seen).flatten().tolist() == [2, 3, 4, 5]
         assert np.isfinite(result["asor"]["rnd_loss"]) and result["asor"]["real_fraction"] > 0
     finally:
         algo.stop()
+
+
+# ------------------------------------------------------------------ the robust default
+@pytest.fixture(scope="module")
+def robust(ray_session):
+    algo = lava_ppo(preset="robust").build_algo()
+    yield algo
+    algo.stop()
+
+
+def test_default_is_the_robust_preset():
+    config = lava_ppo(preset="robust").learner_config_dict["asor"]
+    assert config["preset"] == "robust" and config["real_source"] == "archive"
+    assert config["reward_form"] == "logit" and config["lambda_relative"]
+
+
+def test_robust_rewards_change_by_the_updates_delta_and_archive_fills(robust):
+    learner = robust.learner_group._learner
+    state = learner.module[DISC].unwrapped().state
+    for _ in range(3):
+        result = robust.train()
+    assert len(state.archive) > 0 and result["asor"]["archive_states"] == len(state.archive)
+    episodes = sample_episodes(robust, 300)
+    env_total = sum(float(np.sum(e.get_rewards())) for e in episodes)
+    metrics = type(learner.metrics)()
+    batch = learner._learner_connector(
+        rl_module=learner.module, batch={}, episodes=episodes, shared_data={}, metrics=metrics
+    )
+    pb = batch[DEFAULT_MODULE_ID]
+    valid = pb[Columns.LOSS_MASK].bool()
+    stats = metrics.reduce()[DISC]
+    added = pb[Columns.REWARDS][valid].sum().item() - env_total
+    assert added == pytest.approx(stats["aug_reward_mean"] * int(valid.sum()), abs=1e-3)
+    # Bounded: |λ·b| ≤ λ·bonus_clip·reward_scale.
+    bound = stats["lambda"] * 3.0 + 1e-6
+    assert -bound <= stats["aug_reward_min"] and stats["aug_reward_max"] <= bound
+    # The discriminator batch: archive states (label 1) and the whole batch (label 0).
+    labels = batch[DISC]["asor_label"]
+    assert int((labels == 0).sum()) == int(valid.sum()) and int((labels == 1).sum()) > 0
+
+
+def test_robust_checkpoint_restores_the_archive_and_normalisers(robust, tmp_path):
+    robust.train()
+    robust.save_to_path(str(tmp_path))
+    saved = aux_state(robust)
+    assert saved[DISC]["state.archive.size"].sum() > 0
+    restored = Algorithm.from_checkpoint(str(tmp_path))
+    try:
+        got = aux_state(restored)
+        for k in ("state.archive.features", "state.archive.returns", "state.bonus_rms.mean",
+                  "state.reward_rms.var", "state.critic_ready", "state.disc.input_rms.count"):
+            assert torch.equal(saved[DISC][k], got[DISC][k]), k
+    finally:
+        restored.stop()
