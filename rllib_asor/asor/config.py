@@ -30,6 +30,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "lambda_": 0.05,
         "lambda_relative": True,
         "lambda_warmup": True,
+        "shaping": "potential",
         "reward_form": "logit",
         "bonus_norm": True,
         "real_source": "archive",
@@ -44,6 +45,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "lambda_": 0.01,
         "lambda_relative": False,
         "lambda_warmup": False,
+        "shaping": "direct",
         "reward_form": "log",
         "bonus_norm": False,
         "real_source": "batch",
@@ -96,9 +98,9 @@ class AsorConfig:
     logit: the discriminator logit clipped to ±`logit_clip` (AIRL/DAC form, two-signed)."""
     bonus_norm: bool | None = None
     """Centre the bonus by its running mean, divide by its running std, clip to ±`bonus_clip`."""
-    shaping: str = "direct"
-    """direct: r + λ·b(s); potential: r + λ·(γ·b(s′) − b(s)) (Ng et al. 1999: the optimal
-    policy cannot change; b(s′) = 0 after termination)."""
+    shaping: str | None = None
+    """potential (robust): r + λ·(γ·b(s′) − b(s)) (Ng et al. 1999: the optimal policy cannot
+    change; b(s′) = 0 after termination); direct (paper): r + λ·b(s)."""
     bonus_clip: float = 3.0
     """Bound of the normalised bonus: |λ·b| ≤ λ·bonus_clip (× reward scale when relative)."""
     logit_clip: float = 5.0

@@ -11,11 +11,12 @@ proxy on the batches it returns (the rewards use ω from *before* that training 
     4. ω(s): the discriminator's logits on the batch, before its own update
     5. b(s): the bonus form, normalised by its running statistics, optionally shaped
     6. λ:    schedule / auto, × the env reward's running scale, 0 during the warm-up
-    7. r ← r + λ·b(s)
+    7. r ← r + λ·(γ·b(s′) − b(s))  (potential form, default)  or  r + λ·b(s)  (paper)
 """
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Hashable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -39,6 +40,8 @@ from rllib_asor.asor.reward import (
     reward_scale,
     scheduled_lambda,
 )
+
+logger = logging.getLogger(__name__)
 
 
 class AsorState(nn.Module):
@@ -156,9 +159,12 @@ def asor_update(
     logits = state.disc(feats)
     # 5. The bonus b(s).
     bonus = _bonus(cfg, state, logits)
-    if cfg.shaping == "potential":
-        if batch.next_features is None or batch.terminateds is None:
-            raise ValueError("asor.shaping='potential' needs next observations and terminateds")
+    potential = cfg.shaping == "potential"
+    if potential and (batch.next_features is None or batch.terminateds is None):
+        _warn_once("asor.shaping='potential': this batch has no next states (a recurrent "
+                   "module's padded batch?); using the direct form r + λ·b(s)")
+        potential = False
+    if potential:
         next_bonus = _bonus(cfg, state, state.disc(batch.next_features), update_stats=False)
         bonus = potential_shaping(bonus, next_bonus, batch.terminateds, batch.gamma)
     # 6. λ for this batch.
@@ -177,6 +183,7 @@ def asor_update(
         raise ValueError("ASOR: the reward bonus is NaN/inf")
     metrics = _metrics(cfg, state, lam_eff, scale, bonus, delta, logits, batch, batch_real, labels)
     metrics.update({"critic_ev": ev if ev is not None else float("nan"), "active": float(active)})
+    metrics["potential"] = float(potential)
     return AsorResult(delta, disc_feats, labels, metrics)
 
 
@@ -232,6 +239,12 @@ def _archive_episodes(archive: StateArchive, batch: AsorBatch) -> None:
             gamma=batch.gamma,
         )
     archive.end_call(batch.gamma)
+
+
+def _warn_once(message: str, _seen: set[str] = set()) -> None:  # noqa: B006 - a cache
+    if message not in _seen:
+        _seen.add(message)
+        logger.warning(message)
 
 
 def _torch_generator(rng: np.random.Generator) -> torch.Generator:

@@ -173,13 +173,12 @@ class AsorRewardConnector(ConnectorV2):
                 select(flat(pb[Columns.NEXT_OBS]), cfg.obs_keys), space
             )[rows]
         elif mask is not None and len(lead) == 1:
-            # On-policy: each chunk ends with a bootstrap row (loss mask False) holding s_T.
-            chunks = self._chunks(episodes, policy_id, valid)
-            if chunks is not None:
-                nxt = rows + 1
-                asor_batch.next_features = all_features[nxt]
-                asor_batch.next_values = all_values[nxt]
-                asor_batch.chunks = chunks
+            # On-policy: each chunk ends with a bootstrap row (loss mask False) holding s_T,
+            # so the row after a valid one is always its next state.
+            nxt = rows + 1
+            asor_batch.next_features = all_features[nxt]
+            asor_batch.next_values = all_values[nxt]
+            asor_batch.chunks = self._chunks(episodes, policy_id, valid)
         state = rl_module[ids.disc].unwrapped().state
         proxy = rl_module[ids.proxy].unwrapped().proxy if ids.proxy is not None else None
         result = asor_update(cfg, state, proxy, asor_batch, self._rng)

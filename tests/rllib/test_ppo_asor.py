@@ -239,8 +239,8 @@ def test_robust_rewards_change_by_the_updates_delta_and_archive_fills(robust):
     stats = metrics.reduce()[DISC]
     added = pb[Columns.REWARDS][valid].sum().item() - env_total
     assert added == pytest.approx(stats["aug_reward_mean"] * int(valid.sum()), abs=1e-3)
-    # Bounded: |λ·b| ≤ λ·bonus_clip·reward_scale.
-    bound = stats["lambda"] * 3.0 + 1e-6
+    # Bounded: |λ(γb′ − b)| ≤ (1 + γ)·λ·bonus_clip, λ already × the reward scale.
+    bound = stats["lambda"] * 2.0 * 3.0 + 1e-6
     assert -bound <= stats["aug_reward_min"] and stats["aug_reward_max"] <= bound
     # The discriminator batch: archive states (label 1) and the whole batch (label 0).
     labels = batch[DISC]["asor_label"]
