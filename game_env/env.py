@@ -77,15 +77,18 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
         self.sim.max_episode_steps = limit or self._max_steps
         obs = self.sim.reset()
         self._done = False
-        return {k: v[0] for k, v in obs.items()}, {"map_id": map_id, "course_seed": cseed}
+        info = {"map_id": map_id, "dynamics_id": map_id, "course_seed": cseed}
+        return {k: v[0] for k, v in obs.items()}, info
 
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        """One env step; ``info`` carries ``reward_terms``, ``map_id`` (and metrics at the end)."""
+        """One env step; ``info`` carries ``reward_terms``, ``map_id`` (also as ``dynamics_id``: a
+        map's elements are its dynamics) and, at the end, the episode metrics."""
         sim = self.sim
         obs, terms, done, err = sim.step([check_action(action)])
         tl = terms[0]
         info: dict[str, Any] = {"reward_terms": dict(zip(REWARD_TERMS, tl, strict=True)),
-                                "map_id": sim.map_id, "course_seed": sim.course_seed}
+                                "map_id": sim.map_id, "dynamics_id": sim.map_id,
+                                "course_seed": sim.course_seed}
         reward = sum(tl)
         terminated = bool(done[0])
         truncated = sim.steps >= sim.max_episode_steps

@@ -86,7 +86,7 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
         obs = self.sim.reset()
         self.agents = list(self.possible_agents)
         self._live = set(self.agents)
-        info = {"map_id": map_id, "course_seed": cseed}
+        info = {"map_id": map_id, "dynamics_id": map_id, "course_seed": cseed}
         return self._split(obs, self.agents), {a: dict(info) for a in self.agents}
 
     def _split(self, obs: dict[str, np.ndarray], agents: list[str]) -> dict[str, dict[str, np.ndarray]]:
@@ -117,7 +117,7 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
             i = index[a]
             tl = terms[i]
             info = {"reward_terms": dict(zip(REWARD_TERMS, tl, strict=True)), "map_id": sim.map_id,
-                    "course_seed": sim.course_seed}
+                    "dynamics_id": sim.map_id, "course_seed": sim.course_seed}
             rewards[a] = sum(tl)
             terminations[a] = bool(done[i])
             truncations[a] = bool(truncate)

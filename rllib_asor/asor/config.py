@@ -108,7 +108,7 @@ class AsorConfig:
     real_source: str | None = None
     """Where D_P ("real") comes from: batch (paper: partition of the current batch) or
     archive (the states of the highest-return episodes so far, per dynamics)."""
-    archive_size: int = 2048
+    archive_size: int = 4096
     """States kept per dynamics bucket by the archive (real_source="archive")."""
     rho_value: float = 0.5
     """ρ1 ∈ (0, 1]: fraction of the batch with the highest V(s) that forms P."""
@@ -146,7 +146,7 @@ class AsorConfig:
     """RND output dimension."""
     rnd_lr: float = 1e-3
     """Adam learning rate of the RND predictor (or the dynamics ensemble)."""
-    dynamics_buckets: int = 8
+    dynamics_buckets: int = 16
     """Predictors of `rnd_per_dynamics` and buckets of the archive (dynamics ids modulo this)."""
     ensemble_size: int = 5
     """K, the number of dynamics models when proxy == "ensemble"."""

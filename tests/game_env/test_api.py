@@ -86,7 +86,7 @@ def test_malformed_reset_options_raise_value_error():
     with pytest.raises(ValueError, match="options"):
         env.reset(options="map 3")
     _, info = env.reset(options={"map_id": 5, "course_seed": 7})
-    assert info == {"map_id": 5, "course_seed": 7}
+    assert info == {"map_id": 5, "dynamics_id": 5, "course_seed": 7}
 
 
 @pytest.mark.parametrize("action", [[3, 1, 0, 0, 0, 0, 0, 0], [1, 1, 0, 0, 0, 0, 8, 0], [1, 1, 0], "jump",
