@@ -138,14 +138,7 @@ def test_asor_lava_example_test_run_reports_asor_metrics(tmp_path, cli_ray):
     [trial] = trial_dirs(tmp_path / "lava-ppo-asor")
     assert trial.name.startswith("AsorPPO_")
     params = json.loads((trial / "params.json").read_text())  # the trial's resolved param space
-    assert params["asor"] == {
-        "mode": "asor",
-        "lambda_": 0.002,
-        "rho_value": 0.5,
-        "rho_count": 0.5,
-        "proxy": "rnd",
-        "reward_form": "log",
-    }
+    assert params["asor"] == {"mode": "asor"}  # the robust default
     result = last_result(trial)
     assert 0.0 <= result["asor"]["disc_acc"] <= 1.0
     assert "asor/disc_acc" in res.out  # progress-table column

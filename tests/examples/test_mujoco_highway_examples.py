@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from rllib_asor.asor.config import AsorConfig
 from rllib_asor.cli import experiment as E
 from rllib_asor.cli.main import main
 
@@ -61,7 +62,10 @@ def test_example_validates_without_training(path):
     if mode is None:
         assert exp.asor is None
     else:
-        assert exp.asor["mode"] == mode and exp.asor["reward_form"] == "log"
+        # ASOR examples use the robust default; SRPO examples are the published baseline.
+        cfg_asor = AsorConfig.from_dict(exp.asor)
+        assert cfg_asor.mode == mode
+        assert cfg_asor.preset == ("robust" if mode == "asor" else "paper")
 
 
 def _patched(tmp_path: Path, name: str, replace: dict[str, str]) -> Path:
@@ -103,7 +107,7 @@ def test_sac_asor_hopper_test_run_reports_asor_metrics(tmp_path, ray_session):
     assert trial.name.startswith("AsorSAC_")
     assert result["training_iteration"] == 2
     _assert_asor_metrics(result)
-    assert json.loads((trial / "params.json").read_text())["asor"]["lambda_"] == 0.05
+    assert json.loads((trial / "params.json").read_text())["asor"] == {"mode": "asor", "seed": 0}
 
 
 def test_highway_ppo_asor_test_run_reports_asor_metrics(tmp_path, ray_session):

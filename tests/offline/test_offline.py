@@ -124,7 +124,9 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
     # dataset_num_iters_per_learner=1 with num_learners=0 trips RLlib 2.60 (docs/offline.md).
     offline.offline_input(config, dataset, dataset_num_iters_per_learner=2)
     # A λ schedule over dataset rows trained: 0 for the first minibatch (row 0), 0.1 from row 64.
-    algo = rllib_asor.with_asor(config, lambda_=[[0, 0.0], [64, 0.1]], seed=0).build_algo()
+    algo = rllib_asor.with_asor(
+        config, preset="paper", lambda_=[[0, 0.0], [64, 0.1]], seed=0
+    ).build_algo()
     try:
         result = algo.train()
         asor = result["asor"]
@@ -157,6 +159,18 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
         assert torch.allclose(batch["default_policy"]["rewards"], expected, atol=1e-6)
         assert (batch["default_policy"]["rewards"] < env_rewards).all()
         assert batch["asor_disc.default_policy"]["asor_label"].sum() > 0
+
+        # The robust default on the same batch: potential shaping from the dataset's next
+        # observations, bounded by (1 + γ)·λ·bonus_clip × the reward scale.
+        robust = rllib_asor.with_asor(config, seed=0).build_algo()
+        try:
+            metrics = robust.train()["asor"]
+            assert metrics["potential"] == 1.0 and metrics["active"] == 1.0
+            bound = (1 + 0.99) * metrics["lambda"] * 3.0 + 1e-6
+            assert -bound <= metrics["aug_reward_min"] <= metrics["aug_reward_max"] <= bound
+            assert metrics["aug_reward_abs_mean"] > 0
+        finally:
+            robust.stop()
     finally:
         algo.stop()
 
