@@ -23,7 +23,7 @@ from game_env.spaces import REWARD_TERMS, action_space, observation_space
 
 
 class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
-    """Single-racer obstacle race (see ``game_env.spaces`` for spaces, RACE.md for rules).
+    """Single-racer obstacle race (see ``game_env.spaces`` for spaces, docs/game_env.md for rules).
 
     Args:
         map_id: 0..9; a list of map ids (one drawn per reset); or None / "random" to draw

@@ -135,10 +135,10 @@ class AsorConfig:
     disc_input_norm: bool | None = None
     """Normalise the discriminator's inputs by running mean/std (clipped ±5)."""
     label_smoothing: float = 0.0
-    """Targets 1−ε / ε for real / generated; > 0 keeps ω from saturating (LAVA_STUDY.md)."""
+    """Targets 1−ε / ε for real / generated; > 0 keeps ω from saturating (docs/results.md, lava world)."""
     aux_epochs: int = 1
     """Passes of the discriminator and proxy over each train batch (PPO runs `num_epochs`
-    passes for the policy). One pass keeps ω from saturating (LAVA_STUDY.md) and halves
+    passes for the policy). One pass keeps ω from saturating (docs/results.md, lava world) and halves
     ASOR's cost at 6 PPO epochs."""
     rnd_hiddens: list[int] = field(default_factory=lambda: [128, 128])
     """RND target/predictor MLP hidden sizes."""

@@ -68,7 +68,7 @@ class PerDynamicsRND(nn.Module):
     c(s) is the count under the *least familiar* dynamics seen so far, −max_k ‖f̂_k(s) − f(s)‖²,
     so it is high only for states visited under every dynamics — the paper's "globally
     accessible" states — instead of states the current policy visits often overall
-    (LAVA_STUDY.md, point 3). Our extension; needs the env's dynamics id per step.
+    (docs/results.md, lava world). Our extension; needs the env's dynamics id per step.
     """
 
     def __init__(

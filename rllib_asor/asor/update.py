@@ -167,13 +167,16 @@ def asor_update(
     if potential:
         next_bonus = _bonus(cfg, state, state.disc(batch.next_features), update_stats=False)
         bonus = potential_shaping(bonus, next_bonus, batch.terminateds, batch.gamma)
-    # 6. λ for this batch.
-    _, disc_stats = discriminator_loss(logits, batch_real.float())
-    lam = _lambda(cfg, state, disc_stats["js_estimate"].item(), batch.timestep)
+    # 6. λ for this batch ("auto": from the discriminator's JS estimate on its own batch).
+    js = float("nan")
+    if cfg.lambda_ == "auto":
+        _, disc_stats = discriminator_loss(state.disc(disc_feats), labels)
+        js = disc_stats["js_estimate"].item()
+    lam = _lambda(cfg, state, js, batch.timestep)
     state.reward_rms.update(batch.env_rewards.reshape(-1, 1).float())
     scale = reward_scale(state.reward_rms) if cfg.lambda_relative else 1.0
     ev = _critic_ev(batch)
-    if ev is not None and ev > 0.0:
+    if ev is None or ev > 0.0:  # no episode structure (off-policy): nothing to wait for
         state.critic_ready.fill_(1.0)
     active = bool(state.critic_ready.item()) and has_real
     lam_eff = lam * scale if active else 0.0

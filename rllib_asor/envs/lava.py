@@ -5,7 +5,7 @@ two cells wide, lies on a row k drawn from {2, 3, 4, 5} at every reset (the *dyn
 cells are lava). The agent sees only (row, col, flag), where flag = 1 when a lava cell is in its
 4-neighbourhood ("lava within one step"); it never sees k.
 
-Layout "B" (default; LAVA_STUDY.md)::
+Layout "B" (default; derived from the facts the paper states)::
 
          c0 c1 c2 c3 c4 c5 c6
     r0    .  .  .  .  S  .  .      S=(0,4)  G=(5,6)

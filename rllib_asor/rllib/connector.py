@@ -2,7 +2,7 @@
 
 Where it must sit: after `NumpyToTensor` and before the advantage / TD-target computation
 (PPO: right before `GeneralAdvantageEstimation`), so the critic learns the augmented return
-(ALGORITHM.md, Alg. 1 lines 10-11). It sees torch tensors, one dummy step per episode
+(docs/algorithm.md, step 7). It sees torch tensors, one dummy step per episode
 (`Columns.LOSS_MASK` False, left untouched) and, for stateful modules, `[B, T]` padding.
 
 Per trained policy it turns the batch into an `AsorBatch` (flat features of the valid steps,

@@ -1,4 +1,4 @@
-"""partition(): ALGORITHM.md step 3 on hand-made arrays."""
+"""partition(): docs/algorithm.md step 3 on hand-made arrays."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Each mechanic does what RACE.md says, within a stated tolerance (real MuJoCo, no mocks)."""
+"""Each mechanic does what docs/game_env.md says, within a stated tolerance (real MuJoCo, no mocks)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Reward terms and episode metrics behave as RACE.md says (real physics, scripted inputs)."""
+"""Reward terms and episode metrics behave as docs/game_env.md says (real physics, scripted inputs)."""
 
 from __future__ import annotations
 
