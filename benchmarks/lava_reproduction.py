@@ -29,7 +29,13 @@ import numpy as np
 
 from benchmarks.common import bootstrap_ci, run_method_seed_grid, start_local_ray, write_json
 
-DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
+DEFAULT_METHODS = (
+    "ppo",
+    "srpo:preset=paper,mode=srpo",
+    "asor-paper:preset=paper,mode=asor",
+    "asor:mode=asor",
+)
+"""PPO, the published SRPO and ASOR (`preset=paper`), and ASOR's robust default."""
 TRAP_ROW = 2
 """The hardest lava row: the shortest route for rows 3-5 crosses its cells (PPO's known trap)."""
 

@@ -29,7 +29,7 @@ from benchmarks.common import mean_std, run_if_missing, start_local_ray
 from benchmarks.mujoco_shift import parse_method
 
 DEFAULT_METHODS = ("cql", "srpo:mode=srpo", "asor:mode=asor")
-ASOR_BASE = {"lambda_": 0.1, "rho_value": 0.5, "rho_count": 0.5, "proxy": "rnd", "reward_form": "log"}
+ASOR_BASE = {"preset": "paper", "lambda_": 0.1, "rho_value": 0.5, "rho_count": 0.5, "proxy": "rnd", "reward_form": "log"}
 """The offline tuned examples' ASOR block (λ 0.1: SRPO's fixed value)."""
 
 

@@ -32,7 +32,13 @@ import numpy as np
 from benchmarks.common import run_method_seed_grid, start_local_ray, write_json
 from benchmarks.lava_reproduction import parse_method
 
-DEFAULT_METHODS = ("ppo", "srpo:mode=srpo", "asor:mode=asor")
+DEFAULT_METHODS = (
+    "ppo",
+    "srpo:preset=paper,mode=srpo",
+    "asor-paper:preset=paper,mode=asor",
+    "asor:mode=asor",
+)
+"""PPO, the published SRPO and ASOR (`preset=paper`), and ASOR's robust default."""
 COLUMNS = (
     ("success", "success rate"),
     ("trapped", "trapped rate"),
