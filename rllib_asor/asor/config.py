@@ -21,6 +21,7 @@ REWARD_FORMS = ("log", "centered", "gail", "logit")
 REAL_SOURCES = ("batch", "archive")
 SHAPINGS = ("direct", "potential")
 PRESET_NAMES = ("robust", "paper")
+ALGORITHMS = ("PPO", "APPO", "IMPALA", "SAC", "CQL")
 
 PRESETS: dict[str, dict[str, Any]] = {
     # The default: a bounded, two-signed, normalised bonus scaled to the env reward, a

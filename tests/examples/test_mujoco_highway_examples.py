@@ -82,8 +82,10 @@ def _patched(tmp_path: Path, name: str, replace: dict[str, str]) -> Path:
 def _assert_asor_metrics(result: dict) -> None:
     asor = result["asor"]
     assert 0.0 <= asor["disc_acc"] <= 1.0
-    assert asor["real_fraction"] == pytest.approx(0.25, abs=0.03)  # ρ1·ρ2 = 0.25
-    assert asor["aug_reward_max"] <= 0.0  # log form: λ·log ω ≤ 0
+    assert 0.0 <= asor["real_fraction"] <= 0.3  # ≈ ρ1·ρ2 of the partitioned states
+    # The robust default: potential shaping of a bonus clipped to ±3, λ × the reward scale.
+    bound = 2.0 * 3.0 * asor["lambda"] + 1e-6
+    assert -bound <= asor["aug_reward_min"] <= asor["aug_reward_max"] <= bound
 
 
 def test_sac_asor_hopper_test_run_reports_asor_metrics(tmp_path, ray_session):

@@ -46,7 +46,8 @@ def check_result(result, policy):
     asor = result["asor"]
     for key in ASOR_KEYS:
         assert math.isfinite(asor[key]), key
-    assert asor["aug_reward_max"] <= 0.0
+    bound = 2.0 * 3.0 * asor["lambda"] + 1e-6  # potential form, bonus clipped to ±3
+    assert -bound <= asor["aug_reward_min"] <= asor["aug_reward_max"] <= bound
     race = result["race"]
     per_map = {k: v for k, v in race.items() if k.startswith("map_")}
     assert set(race) - set(per_map) == {*RACE_METRICS, "policy_entropy"}

@@ -33,7 +33,11 @@ def test_sac_asor_update_trains_aux_and_values_come_from_critics(ray_session, en
             result = algo.train()
         asor = result["asor"]
         assert asor["real_fraction"] == pytest.approx(0.25, abs=0.02)
-        assert asor["aug_reward_max"] <= 0 and np.isfinite(asor["aug_reward_min"])
+        # Potential shaping (next states from the replayed transitions), bounded by
+        # (1 + γ)·λ·bonus_clip with λ already × the reward scale; two-signed.
+        assert asor["potential"] == 1.0
+        bound = 2.0 * 3.0 * asor["lambda"] + 1e-6
+        assert -bound <= asor["aug_reward_min"] <= asor["aug_reward_max"] <= bound
         assert np.isfinite(asor["disc_loss"]) and np.isfinite(asor[f"{proxy}_loss"])
         # V(s) = min Q(s, π(s)): Pendulum's returns are negative, CartPole's positive.
         assert (asor["value_mean"] < 0) == (env == "Pendulum-v1")
