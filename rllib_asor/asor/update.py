@@ -157,8 +157,8 @@ def asor_update(
     # 4. ω(s) on the batch, before this update's discriminator step.
     state.disc.observe(disc_feats)
     logits = state.disc(feats)
-    # 5. The bonus b(s).
-    bonus = _bonus(cfg, state, logits)
+    # 5. The bonus b(s) (with potential shaping, b is the potential Φ).
+    bonus = potential_of = _bonus(cfg, state, logits)
     potential = cfg.shaping == "potential"
     if potential and (batch.next_features is None or batch.terminateds is None):
         _warn_once("asor.shaping='potential': this batch has no next states (a recurrent "
@@ -187,6 +187,11 @@ def asor_update(
     metrics = _metrics(cfg, state, lam_eff, scale, bonus, delta, logits, batch, batch_real, labels)
     metrics.update({"critic_ev": ev if ev is not None else float("nan"), "active": float(active)})
     metrics["potential"] = float(potential)
+    # |λ·b(s)| relative to the reward scale: the size of the bonus (of the potential Φ when
+    # shaping), scale-free by construction; `bonus_share` is the per-step amount added.
+    metrics["potential_share"] = float(
+        (lam_eff * potential_of).abs().mean() / max(reward_scale(state.reward_rms), 1e-8)
+    )
     return AsorResult(delta, disc_feats, labels, metrics)
 
 

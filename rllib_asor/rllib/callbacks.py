@@ -21,7 +21,7 @@ ASOR_METRICS = frozenset(
         "lambda", "reward_scale", "real_fraction", "aug_reward_mean", "aug_reward_min",
         "aug_reward_max", "aug_reward_abs_mean", "bonus_share", "bonus_mean", "env_reward_mean",
         "value_mean", "value_real_mean", "omega_batch_mean", "omega_real_mean",
-        "omega_generated_mean", "archive_states", "critic_ev", "active", "potential",
+        "omega_generated_mean", "archive_states", "critic_ev", "active", "potential", "potential_share",
         # proxies
         "rnd_loss", "ensemble_loss",
     }
