@@ -22,10 +22,24 @@ __version__ = "0.1.0"
 
 
 def with_asor(algo_config: Any, **asor_settings: Any) -> Any:
-    """Return `algo_config` with ASOR wired in (see `rllib_asor.rllib.wiring.with_asor`)."""
     from rllib_asor.rllib.wiring import with_asor as _with_asor
 
     return _with_asor(algo_config, **asor_settings)
+
+
+def _with_asor_doc() -> str:
+    from rllib_asor.asor.config import settings_help  # stdlib only: cheap to import
+
+    head = """Return a copy of `algo_config` (PPO, SAC or CQL, new API stack, torch) with ASOR.
+
+    `asor_settings` are `AsorConfig` fields (below); none gives the robust default,
+    `preset="paper"` the published form, e.g. `with_asor(config, lambda_=0.1, seed=0)`.
+    Bad settings raise ValueError naming the key, the value and what is allowed.
+    """
+    return head + "\n    " + settings_help().replace("\n", "\n    ")
+
+
+with_asor.__doc__ = _with_asor_doc()
 
 
 def __getattr__(name: str) -> Any:

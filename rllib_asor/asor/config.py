@@ -323,3 +323,40 @@ class AsorConfig:
 
 def _is_number(x: Any) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def field_docs() -> dict[str, str]:
+    """Each `AsorConfig` field's attribute docstring (read from this file's source)."""
+    import ast
+    import inspect
+
+    try:
+        tree = ast.parse(inspect.getsource(AsorConfig))
+    except (OSError, TypeError):  # no source shipped (e.g. a zipped install)
+        return {f.name: "" for f in dataclasses.fields(AsorConfig)}
+    body = tree.body[0].body  # type: ignore[attr-defined]
+    docs: dict[str, str] = {}
+    for node, nxt in zip(body, body[1:], strict=False):
+        if (
+            isinstance(node, ast.AnnAssign)
+            and isinstance(node.target, ast.Name)
+            and isinstance(nxt, ast.Expr)
+            and isinstance(nxt.value, ast.Constant)
+            and isinstance(nxt.value.value, str)
+        ):
+            docs[node.target.id] = " ".join(nxt.value.value.split())
+    return docs
+
+
+def settings_help() -> str:
+    """Every setting with its robust / paper default and its doc, for docstrings and help()."""
+    robust, paper = AsorConfig(), AsorConfig(preset="paper")
+    lines = ["Settings (robust default | paper preset where they differ):"]
+    for name, doc in field_docs().items():
+        a, b = getattr(robust, name), getattr(paper, name)
+        default = f"{a!r}" if a == b else f"{a!r} | paper {b!r}"
+        lines.append(f"    {name} = {default}\n        {doc}")
+    return "\n".join(lines)
+
+
+AsorConfig.__doc__ = f"{AsorConfig.__doc__.rstrip()}\n\n    " + settings_help().replace("\n", "\n    ")

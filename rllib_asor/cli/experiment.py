@@ -462,8 +462,7 @@ def _module_spec(block: dict[str, Any], exp: Experiment) -> Any:
 
 
 def _one_line(e: BaseException) -> str:
-    text = " ".join(str(e).split())
-    return text[:300] or type(e).__name__
+    return " ".join(str(e).split()) or type(e).__name__
 
 
 def _check_grids(exp: Experiment) -> None:

@@ -35,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="rllib", description="Train and evaluate RLlib (new API stack) agents, with ASOR."
     )
+    parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report}")
     sub.required = True
     p_train = sub.add_parser(
@@ -57,6 +58,16 @@ def build_parser() -> argparse.ArgumentParser:
         p_report.add_argument("rest", nargs=argparse.REMAINDER)
         p_report.set_defaults(func=_report_missing)
     return parser
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        ours = version("rllib-asor")
+    except PackageNotFoundError:  # running from a source tree that was not installed
+        ours = "unknown"
+    return f"rllib-asor {ours} (ray {version('ray')}, torch {version('torch')})"
 
 
 def _report_missing(args: argparse.Namespace) -> int:

@@ -55,24 +55,26 @@ def load_experiments(args: argparse.Namespace) -> list[E.Experiment]:
     """Experiments from `file PATH` / `-f PATH` or from `--run/--env/--config`."""
     path = args.config_file
     if args.source:
-        if args.source[0] != "file" or len(args.source) != 2:
+        if len(args.source) == 1 and args.source[0].endswith((".yaml", ".yml")):
+            path = args.source[0]  # `rllib train X.yaml`: what `rllib train file X.yaml` means
+        elif args.source[0] != "file" or len(args.source) != 2:
+            given = " ".join(args.source)
             raise UsageError(
-                f"{' '.join(args.source)!r} is invalid: allowed 'file PATH'", key="rllib train"
+                f"{given!r} is invalid: allowed 'file PATH' (did you mean "
+                f"'rllib train file {args.source[-1]}'?)"
             )
-        path = args.source[1]
+        else:
+            path = args.source[1]
     if path:
         if args.run or args.env or args.config:
-            raise UsageError(
-                "give either 'file PATH' or --run/--env/--config, not both", key="rllib train"
-            )
+            raise UsageError("give either 'file PATH' or --run/--env/--config, not both")
         exps = E.load_file(path)
         if args.name and len(exps) == 1:
             exps[0].name = args.name
         return exps
     if not args.run or not args.env:
         raise UsageError(
-            "missing input: allowed 'file PATH' or --run ALGO --env ID [--config JSON]",
-            key="rllib train",
+            "missing input: allowed 'file PATH' or --run ALGO --env ID [--config JSON]"
         )
     return [E.from_flags(args.run, args.env, args.config, args.name)]
 

@@ -53,9 +53,13 @@ class AsorMultiRLModuleSpec(MultiRLModuleSpec):
 
 
 def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
-    """Return a copy of `config` with ASOR wired in; `settings` are `AsorConfig` fields.
+    """Return a copy of `config` (PPO, SAC or CQL, new API stack, torch) with ASOR wired in.
 
-    Raises ValueError for unsupported algorithms, the old API stack, or bad settings.
+    `settings` are `AsorConfig` fields (listed below); none at all gives the robust default,
+    `preset="paper"` the published form. Example:
+    `with_asor(PPOConfig().environment("rllib_asor/LavaWorld-v0"), lambda_=0.1, seed=0)`.
+    Raises ValueError (naming the key, the value and what is allowed) for unsupported
+    algorithms, the old API stack, or bad settings.
     """
     asor = AsorConfig.from_dict(settings)
     if not isinstance(config, AlgorithmConfig):

@@ -215,3 +215,12 @@ def test_paper_preset_is_the_log_penalty_on_the_batch_partition():
     assert torch.allclose(result.reward_delta, expected)
     assert result.disc_features.shape[0] == batch.features.shape[0]
     assert result.disc_labels.mean().item() == pytest.approx(0.5, abs=0.01)
+
+
+def test_help_lists_every_setting_with_its_doc():
+    import rllib_asor
+
+    for doc in (AsorConfig.__doc__, rllib_asor.with_asor.__doc__):
+        for name in ("preset", "lambda_", "real_source", "archive_size", "disc_grad_penalty"):
+            assert f"    {name} = " in doc, name
+    assert "paper 'log'" in AsorConfig.__doc__  # the paper preset's value beside the default

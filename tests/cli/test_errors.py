@@ -194,3 +194,25 @@ def test_bad_curriculum_stage_exits_2(write_yaml, capsys):
     rc, err = _run(capsys, ["train", "file", path])
     assert rc == 2
     _assert_one_line(err, "x.config.curriculum", "stage 1", "allowed: 0..9")
+
+
+def test_asor_key_typo_suggests_the_key_and_is_not_cut(write_yaml, capsys):
+    rc, err = _run(capsys, ["train", "file", write_yaml(GOOD_HEAD + "  config: {asor: {lamda_: 0.1}}\n")])
+    assert rc == 2
+    _assert_one_line(err, "'lamda_' (did you mean 'lambda_'?)", "allowed:", "seed")
+
+
+def test_train_without_file_word_takes_a_yaml_path_or_suggests_it(write_yaml, capsys):
+    rc, err = _run(capsys, ["train", write_yaml(GOOD_HEAD + "  config: {num_epoch: 3}\n")])
+    assert rc == 2  # the YAML was read: its own error, not a usage error about 'file'
+    _assert_one_line(err, "did you mean num_epochs")
+    rc, err = _run(capsys, ["train", "experiment.txt"])
+    assert rc == 2
+    _assert_one_line(err, "did you mean 'rllib train file experiment.txt'?")
+    assert "rllib train: error: rllib train" not in err
+
+
+def test_version_names_ours_ray_and_torch(capsys):
+    assert main(["--version"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("rllib-asor ") and "ray 2.60.0" in out and "torch " in out
