@@ -260,3 +260,40 @@ def test_robust_checkpoint_restores_the_archive_and_normalisers(robust, tmp_path
             assert torch.equal(saved[DISC][k], got[DISC][k]), k
     finally:
         restored.stop()
+
+
+def _cartpole_ppo(reward_scale: float):
+    import gymnasium as gym
+    from ray.tune.registry import register_env
+
+    name = f"cartpole_x{reward_scale:g}"
+    register_env(
+        name,
+        lambda cfg: gym.wrappers.TransformReward(gym.make("CartPole-v1"), lambda r: r * reward_scale),
+    )
+    config = (
+        PPOConfig()
+        .environment(name)
+        .env_runners(num_env_runners=0, num_envs_per_env_runner=4)
+        .training(train_batch_size=512, minibatch_size=128, num_epochs=2, lr=1e-3)
+        .rl_module(model_config={"fcnet_hiddens": [32, 32]})
+        .debugging(seed=0)
+    )
+    return rllib_asor.with_asor(config, seed=0)
+
+
+def test_robust_bonus_is_scale_free_and_finite_on_a_constant_reward(ray_session):
+    """CartPole pays 1 per step (a constant reward); ×100 must not change the bonus's share."""
+    shares = {}
+    for scale in (1.0, 100.0):
+        algo = _cartpole_ppo(scale).build_algo()
+        try:
+            for _ in range(4):
+                asor = algo.train()["asor"]
+        finally:
+            algo.stop()
+        assert asor["active"] == 1.0 and asor["reward_scale"] == pytest.approx(scale, rel=1e-3)
+        for key in ("aug_reward_min", "aug_reward_max", "potential_share", "bonus_share"):
+            assert np.isfinite(asor[key]), key
+        shares[scale] = asor["potential_share"]
+    assert shares[1.0] > 0 and 0.5 <= shares[100.0] / shares[1.0] <= 2.0
