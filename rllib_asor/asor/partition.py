@@ -7,14 +7,17 @@ Ties keep batch order (stable sort), so the result is a pure function of its inp
 from __future__ import annotations
 
 import math
-from typing import TypeVar
+import sys
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
-import torch
+
+if TYPE_CHECKING:
+    import torch
 
 from rllib_asor.asor.config import MODES, effective_rhos
 
-ArrayT = TypeVar("ArrayT", np.ndarray, torch.Tensor)
+ArrayT = TypeVar("ArrayT", np.ndarray, "torch.Tensor")
 
 
 def real_set_size(n: int, rho_value: float, rho_count: float, mode: str = "asor") -> int:
@@ -48,7 +51,7 @@ def partition(
     for name, rho in (("rho_value", rho_value), ("rho_count", rho_count)):
         if not (isinstance(rho, int | float) and 0.0 < rho <= 1.0):
             raise ValueError(f"partition: {name}={rho!r} is invalid: allowed a number in (0, 1]")
-    is_torch = isinstance(values, torch.Tensor)
+    is_torch = _torch_type(values, "Tensor")
     v = _as_numpy(values, "values")
     n = v.shape[0]
     uses_counts = mode in ("asor", "count")
@@ -75,7 +78,7 @@ def partition(
                 chosen = top_value
         mask[chosen] = True
     if is_torch:
-        return torch.from_numpy(mask).to(values.device)
+        return sys.modules["torch"].from_numpy(mask).to(values.device)
     return mask
 
 
@@ -85,7 +88,7 @@ def _top_k(x: np.ndarray, k: int) -> np.ndarray:
 
 
 def _as_numpy(x: np.ndarray | torch.Tensor, name: str) -> np.ndarray:
-    arr = x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+    arr = x.detach().cpu().numpy() if _torch_type(x, "Tensor") else np.asarray(x)
     if arr.ndim != 1:
         raise ValueError(f"partition: {name} must be 1-D, got shape {arr.shape}")
     arr = arr.astype(np.float64, copy=False)
@@ -99,6 +102,14 @@ def _random_generator(
 ) -> np.random.Generator:
     if isinstance(rng, np.random.Generator):
         return rng
-    if isinstance(rng, torch.Generator):
+    if _torch_type(rng, "Generator"):
+        torch = sys.modules["torch"]
         return np.random.default_rng(int(torch.randint(0, 2**31 - 1, (1,), generator=rng)))
     return np.random.default_rng(rng)
+
+
+def _torch_type(x: Any, name: str) -> bool:
+    """isinstance(x, torch.<name>) without importing torch: a torch object means torch is
+    already loaded (this module stays importable without it, like `rllib_asor.asor`)."""
+    torch = sys.modules.get("torch")
+    return torch is not None and isinstance(x, getattr(torch, name))
