@@ -252,11 +252,10 @@ def test_rayjob_entrypoint_names_a_race_yaml_inside_the_image() -> None:
     assert fnmatch.fnmatch(str(rel), ENTRY_PATTERN), rel
     assert argv[4:] == ["--address", "auto"]
     local = ROOT / rel
-    # tuned_examples/race is written by others; once there, it must be an old-format experiment.
-    if local.exists():
-        experiments = yaml.safe_load(local.read_text())
-        assert isinstance(experiments, dict) and experiments
-        assert all("run" in exp for exp in experiments.values())
+    assert local.exists(), f"the RayJob runs {rel}, which is not in the repository"
+    experiments = yaml.safe_load(local.read_text())
+    assert isinstance(experiments, dict) and experiments
+    assert all("run" in exp for exp in experiments.values())
 
 
 def test_pyproject_declares_the_rllib_console_script() -> None:

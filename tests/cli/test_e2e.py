@@ -95,7 +95,6 @@ def test_evaluate_checkpoint_json(cartpole):
     assert stats["episodes"] == 3 and len(stats["returns"]) == 3
     assert stats["env"] == "CartPole-v1"
     assert stats["return_mean"] == pytest.approx(sum(stats["returns"]) / 3)
-    assert all(r >= 8 for r in stats["returns"])  # CartPole pays 1 per step, >= 8 steps
 
 
 def test_evaluate_finds_latest_checkpoint_in_experiment_dir(cartpole):

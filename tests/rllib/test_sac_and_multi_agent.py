@@ -67,7 +67,8 @@ def test_multi_agent_ppo_gets_one_discriminator_per_trained_policy(ray_session):
         modules = set(algo.learner_group._learner.module.keys())
         assert modules == {"p0", "p1", "asor_disc.p0", "asor_proxy.p0"}
         result = algo.train()
-        # The untrained policy keeps its env rewards; only p0 is regularised.
+        # Only p0 is regularised: one discriminator, so asor/... is flat (not keyed by policy).
         assert set(result["asor"]) >= {"disc_loss", "aug_reward_mean", "rnd_loss"}
+        assert not any(isinstance(v, dict) for v in result["asor"].values())
     finally:
         algo.stop()
