@@ -118,8 +118,9 @@ def evaluate(
         done = algo.env_runner.sample(num_episodes=episodes, explore=explore)
     finally:
         algo.stop()
-    returns = [float(ep.get_return()) for ep in done][:episodes]
-    lengths = [int(len(ep)) for ep in done][:episodes]
+    done = done[:episodes]
+    returns = [float(ep.get_return()) for ep in done]
+    lengths = [int(len(ep)) for ep in done]
     mean = sum(returns) / len(returns)
     std = math.sqrt(sum((r - mean) ** 2 for r in returns) / len(returns))
     return {
@@ -133,7 +134,36 @@ def evaluate(
         "return_max": max(returns),
         "returns": returns,
         "lengths": lengths,
+        "episode_metrics": episode_metrics(done),
     }
+
+
+def episode_metrics(episodes: list[Any]) -> dict[str, float]:
+    """Means over episodes of what the env reports in its last `info`: the race's
+    `info["episode_metrics"]` (success, trapped, unnecessary-jump rate, goal reward, ...) and
+    gymnasium's `is_success` (as `success`). Multi-agent episodes count every agent."""
+    rows: list[dict[str, float]] = []
+    for ep in episodes:
+        try:
+            info = ep.get_infos(-1)
+        except (AttributeError, IndexError, TypeError):
+            continue
+        infos = info.values() if info and all(isinstance(v, dict) for v in info.values()) else [info]
+        for one in infos:
+            row = {}
+            metrics = one.get("episode_metrics") if isinstance(one, dict) else None
+            if isinstance(metrics, dict):
+                row.update({k: float(v) for k, v in metrics.items() if _is_number(v)})
+            if isinstance(one, dict) and _is_number(one.get("is_success")):
+                row.setdefault("success", float(one["is_success"]))
+            if row:
+                rows.append(row)
+    keys = sorted({k for row in rows for k in row})
+    return {k: sum(r[k] for r in rows if k in r) / sum(k in r for r in rows) for k in keys}
+
+
+def _is_number(x: Any) -> bool:
+    return isinstance(x, int | float | bool) and math.isfinite(float(x))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -154,5 +184,10 @@ def run(args: argparse.Namespace) -> int:
     )
     print("episode returns: " + " ".join(f"{r:g}" for r in stats["returns"]))
     print("episode lengths: " + " ".join(str(n) for n in stats["lengths"]))
+    if stats["episode_metrics"]:
+        print(
+            "env metrics (mean over episodes): "
+            + "  ".join(f"{k} {v:.3g}" for k, v in stats["episode_metrics"].items())
+        )
     sys.stdout.flush()
     return 0
