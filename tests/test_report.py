@@ -408,3 +408,14 @@ def test_cli_success_writes_report_and_prints_path(
     assert report.run(args) == 0
     assert capsys.readouterr().out.strip() == str(out / "report.md")
     assert "last 2 iteration(s)" in (out / "report.md").read_text()
+
+
+def test_headline_columns_show_each_metric_once_without_per_map_copies() -> None:
+    keys = [
+        "race/success_rate", "env_runners/race/success_rate", "race/map_7/success_rate",
+        "env_runners/race/map_7/success_rate", "race/trapped_rate", "race/curriculum_stage",
+        "asor/disc_acc", "asor/rnd_loss", "asor/p0/disc_acc", "asor/bonus_share",
+    ]
+    assert report.headline_columns(keys) == [
+        "asor/bonus_share", "asor/disc_acc", "race/success_rate", "race/trapped_rate",
+    ]

@@ -52,8 +52,10 @@ MODE_SUFFIX = {"asor": "+ASOR", "srpo": "+SRPO"}
 EXTRA_METRIC_RE = re.compile(r"(^|/)(race|asor)/")
 """Result keys eligible as extra columns: ``race/...`` and ``asor/...`` metrics."""
 
-HEADLINE_ASOR = ("disc_acc", "real_fraction", "aug_reward_mean", "lambda")
-"""ASOR metrics shown by default (all ``race/...`` metrics are; ``--columns all`` shows every one)."""
+HEADLINE_ASOR = ("disc_acc", "aug_reward_mean", "bonus_share", "lambda", "active")
+"""ASOR metrics shown by default (``--columns all`` shows every one)."""
+HEADLINE_RACE = ("success_rate", "trapped_rate", "unnecessary_jump_rate", "goal_reward")
+"""Race metrics shown by default: the paper's table, over all maps (per map: ``--columns all``)."""
 
 
 @dataclass
@@ -312,11 +314,25 @@ def _mean_std(vals: Sequence[float]) -> tuple[float, float]:
 
 
 def _is_headline(key: str) -> bool:
-    """Default extra column: any race/... metric, and the headline asor/... ones."""
+    """A headline race/... or asor/... metric (over all maps and policies)."""
     parts = key.split("/")
-    if "race" in parts[:-1]:
-        return True
-    return "asor" in parts[:-1] and parts[-1] in HEADLINE_ASOR
+    if len(parts) < 2:
+        return False
+    group, name = parts[-2], parts[-1]
+    return (group == "race" and name in HEADLINE_RACE) or (
+        group == "asor" and name in HEADLINE_ASOR
+    )
+
+
+def headline_columns(keys: Iterable[str]) -> list[str]:
+    """The default extra columns: each headline metric once, from its shortest key (RLlib
+    reports race metrics both as `race/...` and `env_runners/race/...`)."""
+    best: dict[str, str] = {}
+    for key in sorted(k for k in keys if _is_headline(k)):
+        tail = "/".join(key.split("/")[-2:])
+        if tail not in best or len(key) < len(best[tail]):
+            best[tail] = key
+    return sorted(best.values())
 
 
 def summarize(
@@ -352,7 +368,7 @@ def summarize(
 
     found = {k for t in with_metric for r in t.rows for k in r if EXTRA_METRIC_RE.search(k)}
     if columns is None:
-        columns = sorted(k for k in found if _is_headline(k))
+        columns = headline_columns(found)
     elif list(columns) == ["all"]:
         columns = sorted(found)
     columns = [c for c in columns if c != metric]
