@@ -359,4 +359,6 @@ def settings_help() -> str:
     return "\n".join(lines)
 
 
-AsorConfig.__doc__ = f"{AsorConfig.__doc__.rstrip()}\n\n    " + settings_help().replace("\n", "\n    ")
+AsorConfig.__doc__ = f"{AsorConfig.__doc__.rstrip()}\n\n    " + settings_help().replace(
+    "\n", "\n    "
+)

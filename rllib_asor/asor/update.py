@@ -104,7 +104,7 @@ class AsorResult:
     """What the caller applies and trains."""
 
     reward_delta: torch.Tensor
-    """[N] λ·b(s), to add to the env rewards."""
+    """[N] λ·(γ·b(s′) − b(s)) (potential) or λ·b(s) (direct), to add to the env rewards."""
     disc_features: torch.Tensor
     """[M, D] the discriminator's train batch: D_P then D_Q."""
     disc_labels: torch.Tensor
@@ -161,8 +161,10 @@ def asor_update(
     bonus = potential_of = _bonus(cfg, state, logits)
     potential = cfg.shaping == "potential"
     if potential and (batch.next_features is None or batch.terminateds is None):
-        _warn_once("asor.shaping='potential': this batch has no next states (a recurrent "
-                   "module's padded batch?); using the direct form r + λ·b(s)")
+        _warn_once(
+            "asor.shaping='potential': this batch has no next states (a recurrent "
+            "module's padded batch?); using the direct form r + λ·b(s)"
+        )
         potential = False
     if potential:
         next_bonus = _bonus(cfg, state, state.disc(batch.next_features), update_stats=False)
@@ -184,13 +186,17 @@ def asor_update(
     delta = (lam_eff * bonus).to(batch.env_rewards.dtype)
     if not torch.isfinite(delta).all():
         raise ValueError("ASOR: the reward bonus is NaN/inf")
-    metrics = _metrics(cfg, state, lam_eff, scale, bonus, delta, logits, batch, batch_real, labels)
-    metrics.update({"critic_ev": ev if ev is not None else float("nan"), "active": float(active)})
-    metrics["potential"] = float(potential)
-    # |λ·b(s)| relative to the reward scale: the size of the bonus (of the potential Φ when
-    # shaping), scale-free by construction; `bonus_share` is the per-step amount added.
-    metrics["potential_share"] = float(
-        (lam_eff * potential_of).abs().mean() / max(reward_scale(state.reward_rms), 1e-8)
+    metrics = _metrics(state, lam_eff, scale, bonus, delta, logits, batch, batch_real, labels)
+    rms = max(reward_scale(state.reward_rms), 1e-8)
+    metrics.update(
+        {
+            "critic_ev": ev if ev is not None else float("nan"),
+            "active": float(active),
+            "potential": float(potential),
+            # |λ·b(s)| / reward scale: the size of the bonus itself (of Φ when shaping);
+            # `bonus_share` is the same for the per-step amount added.
+            "potential_share": float((lam_eff * potential_of).abs().mean() / rms),
+        }
     )
     return AsorResult(delta, disc_feats, labels, metrics)
 
@@ -260,7 +266,6 @@ def _torch_generator(rng: np.random.Generator) -> torch.Generator:
 
 
 def _metrics(
-    cfg: AsorConfig,
     state: AsorState,
     lam: float,
     scale: float,

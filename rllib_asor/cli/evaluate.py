@@ -148,7 +148,9 @@ def episode_metrics(episodes: list[Any]) -> dict[str, float]:
             info = ep.get_infos(-1)
         except (AttributeError, IndexError, TypeError):
             continue
-        infos = info.values() if info and all(isinstance(v, dict) for v in info.values()) else [info]
+        infos = (
+            info.values() if info and all(isinstance(v, dict) for v in info.values()) else [info]
+        )
         for one in infos:
             row = {}
             metrics = one.get("episode_metrics") if isinstance(one, dict) else None
