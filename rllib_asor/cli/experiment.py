@@ -122,6 +122,26 @@ def _absolute_input(value: Any) -> Any:
     return value
 
 
+def _check_input_exists(value: Any, source: str, name: str) -> None:
+    """A local offline `input` that does not exist fails here, before Ray starts."""
+    paths = value if isinstance(value, list) else [value]
+    missing = [
+        p for p in paths if isinstance(p, str) and os.path.isabs(p) and not os.path.exists(p)
+    ]
+    if missing:
+        hint = (
+            "; make the offline datasets first: `make datasets` (about 10 minutes on 2 cores, "
+            "docs/offline.md)"
+            if any("data/offline" in p for p in missing)
+            else ""
+        )
+        raise UsageError(
+            f"offline input {missing[0]} does not exist{hint}",
+            source=source,
+            key=f"{name}.config.input",
+        )
+
+
 def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     """Translate one `name: {...}` entry (legacy keys renamed with a warning)."""
     if not isinstance(spec, dict):
@@ -164,6 +184,7 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     warns += more
     if "input" in config:
         config["input"] = _absolute_input(config["input"])
+        _check_input_exists(config["input"], source, name)
     stop, more = legacy.translate_stop(
         _mapping(spec.get("stop") or {}, source, f"{name}.stop"), source, f"{name}.stop."
     )

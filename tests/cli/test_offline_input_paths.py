@@ -2,6 +2,9 @@
 
 import os
 
+import pytest
+
+from rllib_asor.cli.errors import UsageError
 from rllib_asor.cli.experiment import parse_experiment
 
 
@@ -12,8 +15,16 @@ def _input_of(value):
 
 def test_relative_input_paths_become_absolute(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "data/offline/hopper").mkdir(parents=True)
+    (tmp_path / "a").mkdir()
     assert _input_of("data/offline/hopper") == os.path.join(str(tmp_path), "data/offline/hopper")
     assert _input_of(["a", "s3://bucket/b"]) == [os.path.join(str(tmp_path), "a"), "s3://bucket/b"]
+
+
+def test_missing_dataset_fails_before_ray_and_names_make_datasets(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(UsageError, match=r"x\.config\.input: offline input .*does not exist.*make datasets"):
+        _input_of(["data/offline/hopper/original/medium"])
 
 
 def test_sampler_and_uris_are_kept():
