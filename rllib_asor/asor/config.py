@@ -21,7 +21,8 @@ REWARD_FORMS = ("log", "centered", "gail", "logit")
 REAL_SOURCES = ("batch", "archive")
 SHAPINGS = ("direct", "potential")
 PRESET_NAMES = ("robust", "paper")
-ALGORITHMS = ("PPO", "APPO", "IMPALA", "SAC", "CQL")
+ALGORITHMS = ("CQL", "PPO", "SAC")
+"""RLlib algorithms ASOR works with (`rllib_asor.rllib.wiring` has one Learner class each)."""
 
 PRESETS: dict[str, dict[str, Any]] = {
     # The default: a bounded, two-signed, normalised bonus scaled to the env reward, a

@@ -521,13 +521,6 @@ def validate_asor(exp: Experiment) -> None:
         return
     from rllib_asor.asor.config import ALGORITHMS, AsorConfig
 
-    try:  # what the RLlib glue supports now (a subset of what the method is defined for)
-        with _quiet():
-            from rllib_asor.rllib.wiring import SUPPORTED
-
-        ALGORITHMS = tuple(sorted(SUPPORTED))  # noqa: N806
-    except ImportError:
-        pass
     if exp.run not in ALGORITHMS:
         raise UsageError(
             f"ASOR does not support {exp.run!r}; allowed: {', '.join(ALGORITHMS)}",

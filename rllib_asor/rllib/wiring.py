@@ -19,7 +19,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-from rllib_asor.asor.config import AsorConfig
+from rllib_asor.asor.config import ALGORITHMS, AsorConfig
 from rllib_asor.rllib.callbacks import AsorMetricsCallback, add_callbacks
 from rllib_asor.rllib.envs import register_with_tune
 from rllib_asor.rllib.learners import (
@@ -33,6 +33,7 @@ from rllib_asor.rllib.learners import (
 from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 
 SUPPORTED = {"PPO": AsorPPOTorchLearner, "SAC": AsorSACTorchLearner, "CQL": AsorCQLTorchLearner}
+assert tuple(sorted(SUPPORTED)) == ALGORITHMS, "one list of supported algorithms (asor.config)"
 
 
 class AsorMultiRLModuleSpec(MultiRLModuleSpec):
