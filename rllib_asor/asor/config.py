@@ -20,6 +20,7 @@ PROXIES = ("rnd", "ensemble", "rnd_per_dynamics")
 REWARD_FORMS = ("log", "centered", "gail", "logit")
 REAL_SOURCES = ("batch", "archive")
 SHAPINGS = ("direct", "potential")
+BONUS_NORMS = ("running", "batch", "off")
 PRESET_NAMES = ("robust", "paper")
 ALGORITHMS = ("CQL", "PPO", "SAC")
 """RLlib algorithms ASOR works with (`rllib_asor.rllib.wiring` has one Learner class each)."""
@@ -34,7 +35,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "lambda_warmup": True,
         "shaping": "potential",
         "reward_form": "logit",
-        "bonus_norm": True,
+        "bonus_norm": "running",
         "real_source": "archive",
         "disc_lr": 3e-4,
         "disc_grad_penalty": 5.0,
@@ -49,7 +50,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "lambda_warmup": False,
         "shaping": "direct",
         "reward_form": "log",
-        "bonus_norm": False,
+        "bonus_norm": "off",
         "real_source": "batch",
         "disc_lr": 1e-3,
         "disc_grad_penalty": 0.0,
@@ -98,8 +99,10 @@ class AsorConfig:
     reward_form: str | None = None
     """log: log ω (paper, ≤ 0); centered: log ω minus its batch mean; gail: −log(1 − ω) ≥ 0;
     logit: the discriminator logit clipped to ±`logit_clip` (AIRL/DAC form, two-signed)."""
-    bonus_norm: bool | None = None
-    """Centre the bonus by its running mean, divide by its running std, clip to ±`bonus_clip`."""
+    bonus_norm: str | None = None
+    """Standardise the bonus, then clip it to ±`bonus_clip`: running (robust: by its running
+    mean/std over all batches so far), batch (by this batch's mean/std, like PPO's advantage
+    normalisation), or off (paper)."""
     shaping: str | None = None
     """potential (robust): r + λ·(γ·b(s′) − b(s)) (Ng et al. 1999: the optimal policy cannot
     change; b(s′) = 0 after termination); direct (paper): r + λ·b(s)."""
@@ -187,6 +190,7 @@ class AsorConfig:
             ("reward_form", REWARD_FORMS),
             ("real_source", REAL_SOURCES),
             ("shaping", SHAPINGS),
+            ("bonus_norm", BONUS_NORMS),
         ):
             if getattr(self, key) not in allowed:
                 _fail(key, getattr(self, key), " | ".join(allowed))
@@ -200,7 +204,7 @@ class AsorConfig:
             v = getattr(self, key)
             if not _is_number(v) or v < 0:
                 _fail(key, v, "a finite number ≥ 0")
-        for key in ("lambda_relative", "lambda_warmup", "bonus_norm", "disc_input_norm"):
+        for key in ("lambda_relative", "lambda_warmup", "disc_input_norm"):
             if not isinstance(getattr(self, key), bool):
                 _fail(key, getattr(self, key), "true or false")
         if not _is_number(self.label_smoothing) or not 0.0 <= self.label_smoothing < 0.5:

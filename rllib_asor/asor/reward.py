@@ -66,14 +66,11 @@ def dual_ascent_step(
     return float(min(max(lam + lr * (js_estimate - target), 0.0), lam_max))
 
 
-@torch.no_grad()
-def normalize_bonus(bonus: torch.Tensor, rms: RunningMeanStd, clip: float) -> torch.Tensor:
-    """(b − running mean) / running std, clipped to ±clip; `rms` is updated with `bonus` first.
-
-    The running statistics (not the batch's) keep one state's bonus comparable across batches.
-    """
-    rms.update(bonus.reshape(-1, 1))
-    return rms.normalize(bonus.reshape(-1, 1), clip=clip).reshape(bonus.shape)
+def standardize(
+    bonus: torch.Tensor, mean: torch.Tensor, var: torch.Tensor, clip: float
+) -> torch.Tensor:
+    """(b − mean) / √(var + 1e-8), clipped to ±clip."""
+    return ((bonus - mean) / torch.sqrt(var + 1e-8)).clamp(-clip, clip)
 
 
 @torch.no_grad()

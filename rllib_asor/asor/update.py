@@ -17,7 +17,7 @@ proxy on the batches it returns (the rewards use ω from *before* that training 
 from __future__ import annotations
 
 import logging
-from collections.abc import Hashable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,11 +34,11 @@ from rllib_asor.asor.proxy import ProxyInputs, VisitationProxy
 from rllib_asor.asor.reward import (
     dual_ascent_step,
     explained_variance,
-    normalize_bonus,
     potential_shaping,
     reward_bonus,
     reward_scale,
     scheduled_lambda,
+    standardize,
 )
 
 logger = logging.getLogger(__name__)
@@ -157,8 +157,13 @@ def asor_update(
     # 4. ω(s) on the batch, before this update's discriminator step.
     state.disc.observe(disc_feats)
     logits = state.disc(feats)
+
     # 5. The bonus b(s) (with potential shaping, b is the potential Φ).
-    bonus = potential_of = _bonus(cfg, state, logits)
+    def raw_bonus(x: torch.Tensor) -> torch.Tensor:
+        return reward_bonus(x, cfg.reward_form, cfg.log_omega_min, cfg.logit_clip)
+
+    normalise = _bonus_normaliser(cfg, state, raw_bonus(logits))
+    bonus = potential_of = normalise(raw_bonus(logits))
     potential = cfg.shaping == "potential"
     if potential and (batch.next_features is None or batch.terminateds is None):
         _warn_once(
@@ -167,7 +172,7 @@ def asor_update(
         )
         potential = False
     if potential:
-        next_bonus = _bonus(cfg, state, state.disc(batch.next_features), update_stats=False)
+        next_bonus = normalise(raw_bonus(state.disc(batch.next_features)))
         bonus = potential_shaping(bonus, next_bonus, batch.terminateds, batch.gamma)
     # 6. λ for this batch ("auto": from the discriminator's JS estimate on its own batch).
     js = float("nan")
@@ -201,15 +206,18 @@ def asor_update(
     return AsorResult(delta, disc_feats, labels, metrics)
 
 
-def _bonus(
-    cfg: AsorConfig, state: AsorState, logits: torch.Tensor, update_stats: bool = True
-) -> torch.Tensor:
-    bonus = reward_bonus(logits, cfg.reward_form, cfg.log_omega_min, cfg.logit_clip)
-    if not cfg.bonus_norm:
-        return bonus
-    if update_stats:
-        return normalize_bonus(bonus, state.bonus_rms, cfg.bonus_clip)
-    return state.bonus_rms.normalize(bonus.reshape(-1, 1), clip=cfg.bonus_clip).reshape(-1)
+def _bonus_normaliser(
+    cfg: AsorConfig, state: AsorState, raw: torch.Tensor
+) -> Callable[[torch.Tensor], torch.Tensor]:
+    """The map raw bonus → the bonus used, fixed for this batch (s and s′ alike)."""
+    if cfg.bonus_norm == "off":
+        return lambda b: b
+    if cfg.bonus_norm == "running":
+        state.bonus_rms.update(raw.reshape(-1, 1))
+        mean, var = state.bonus_rms.mean.reshape(()), state.bonus_rms.var.reshape(())
+    else:  # "batch"
+        mean, var = raw.mean(), raw.var(unbiased=False)
+    return lambda b: standardize(b, mean, var, cfg.bonus_clip)
 
 
 def _lambda(cfg: AsorConfig, state: AsorState, js_estimate: float, timestep: float) -> float:

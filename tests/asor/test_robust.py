@@ -11,10 +11,10 @@ from rllib_asor.asor.discriminator import Discriminator
 from rllib_asor.asor.networks import RunningMeanStd
 from rllib_asor.asor.reward import (
     explained_variance,
-    normalize_bonus,
     potential_shaping,
     reward_bonus,
     reward_scale,
+    standardize,
 )
 from rllib_asor.asor.update import AsorBatch, AsorState, Chunk, asor_update
 
@@ -42,10 +42,21 @@ def test_logit_form_is_two_signed_and_bounded():
     assert b.tolist() == [-5.0, -1.0, 0.0, 2.0, 5.0]
 
 
-def test_normalised_bonus_is_centred_and_clipped():
-    rms = RunningMeanStd(1)
-    b = normalize_bonus(torch.tensor([0.0, 1.0, 2.0, 3.0, 100.0]), rms, clip=1.5)
-    assert b.abs().max() <= 1.5 and b[0] < 0 < b[-1]
+def test_standardised_bonus_is_centred_and_clipped():
+    b = torch.tensor([0.0, 1.0, 2.0, 3.0, 100.0])
+    z = standardize(b, b.mean(), b.var(unbiased=False), clip=1.5)
+    assert z.abs().max() <= 1.5 and z[0] < 0 < z[-1]
+
+
+@pytest.mark.parametrize("norm", ["running", "batch"])
+def test_bonus_norms_keep_the_bound_and_batch_norm_centres_each_batch(norm):
+    cfg = AsorConfig(mode="srpo", bonus_norm=norm, shaping="direct")
+    state, results = _run(cfg, 1.0)
+    delta = results[-1].reward_delta
+    lam = results[-1].metrics["lambda"]
+    assert delta.abs().max() <= lam * cfg.bonus_clip + 1e-6
+    if norm == "batch":
+        assert abs(delta.mean().item()) <= 0.1 * lam  # ≈ zero mean (clipping aside)
 
 
 @pytest.mark.parametrize("scale", [1.0, 100.0])
