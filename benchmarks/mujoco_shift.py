@@ -121,6 +121,7 @@ def ppo_config(task: str, seed: int, asor: dict[str, Any] | None, args: argparse
     from ray.rllib.connectors.env_to_module import MeanStdFilter
 
     import rllib_asor
+    from rllib_asor.rllib.offline import MUJOCO_PPO_MODEL, MUJOCO_PPO_TRAINING
 
     config = (
         PPOConfig()
@@ -134,23 +135,9 @@ def ppo_config(task: str, seed: int, asor: dict[str, Any] | None, args: argparse
         )
         .learners(num_learners=0)
         .training(
-            train_batch_size_per_learner=2048,
-            minibatch_size=args.minibatch,
-            num_epochs=10,
-            lr=3e-4,
-            gamma=0.99,
-            lambda_=0.95,
-            clip_param=0.2,
-            vf_clip_param=1e4,
-            entropy_coeff=0.0,
+            train_batch_size_per_learner=2048, minibatch_size=args.minibatch, **MUJOCO_PPO_TRAINING
         )
-        .rl_module(
-            model_config={
-                "fcnet_hiddens": [64, 64],
-                "fcnet_activation": "tanh",
-                "vf_share_layers": False,
-            }
-        )
+        .rl_module(model_config=dict(MUJOCO_PPO_MODEL))
         .debugging(seed=seed)
     )
     if asor is not None:

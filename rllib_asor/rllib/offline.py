@@ -122,6 +122,20 @@ def sac_config(env_id: str, dynamics: str, steps: int, seed: int) -> Any:
     )
 
 
+MUJOCO_PPO_TRAINING = {
+    "num_epochs": 10,
+    "lr": 3e-4,
+    "gamma": 0.99,
+    "lambda_": 0.95,
+    "clip_param": 0.2,
+    "vf_clip_param": 1e4,  # RLlib's default 10 would cap the value loss at MuJoCo's returns
+    "entropy_coeff": 0.0,
+}
+"""PPO's usual MuJoCo settings (CleanRL/SB3), besides batch and minibatch sizes."""
+MUJOCO_PPO_MODEL = {"fcnet_hiddens": [64, 64], "fcnet_activation": "tanh", "vf_share_layers": False}
+"""64x64 tanh policy and a separate value net."""
+
+
 def ppo_config(env_id: str, dynamics: str, steps: int, seed: int) -> Any:
     """A MuJoCo PPO config (local sampling, 4 vector envs, 2048-step batches, 64x64 tanh nets,
     separate value net; the usual MuJoCo settings) for `steps` env steps."""
@@ -134,23 +148,9 @@ def ppo_config(env_id: str, dynamics: str, steps: int, seed: int) -> Any:
         .env_runners(num_env_runners=0, num_envs_per_env_runner=4)
         .learners(num_learners=0)
         .training(
-            train_batch_size_per_learner=batch,
-            minibatch_size=min(64, batch),
-            num_epochs=10,
-            lr=3e-4,
-            gamma=0.99,
-            lambda_=0.95,
-            clip_param=0.2,
-            vf_clip_param=1e4,
-            entropy_coeff=0.0,
+            train_batch_size_per_learner=batch, minibatch_size=min(64, batch), **MUJOCO_PPO_TRAINING
         )
-        .rl_module(
-            model_config={
-                "fcnet_hiddens": [64, 64],
-                "fcnet_activation": "tanh",
-                "vf_share_layers": False,
-            }
-        )
+        .rl_module(model_config=dict(MUJOCO_PPO_MODEL))
         .debugging(seed=seed, log_level="ERROR")
     )
 
