@@ -136,7 +136,7 @@ def asor_update(
         cand, cand_rtg = state.archive.sample(n, _torch_generator(rng))
         cand_counts = None
         if proxy is not None and cfg.proxy != "ensemble" and len(cand):
-            cand_counts = proxy.count(ProxyInputs(cand, dynamics_ids=None))
+            cand_counts = proxy.count(ProxyInputs(cand))
         mode = cfg.mode if cand_counts is not None or cfg.mode in ("srpo", "random") else "srpo"
         real = (
             partition(cand_rtg, cand_counts, rho_value, rho_count, mode=mode, rng=rng)
@@ -162,8 +162,9 @@ def asor_update(
     def raw_bonus(x: torch.Tensor) -> torch.Tensor:
         return reward_bonus(x, cfg.reward_form, cfg.log_omega_min, cfg.logit_clip)
 
-    normalise = _bonus_normaliser(cfg, state, raw_bonus(logits))
-    bonus = potential_of = normalise(raw_bonus(logits))
+    raw = raw_bonus(logits)
+    normalise = _bonus_normaliser(cfg, state, raw)
+    bonus = potential_of = normalise(raw)
     potential = cfg.shaping == "potential"
     if potential and (batch.next_features is None or batch.terminateds is None):
         _warn_once(
@@ -192,17 +193,19 @@ def asor_update(
     if not torch.isfinite(delta).all():
         raise ValueError("ASOR: the reward bonus is NaN/inf")
     metrics = _metrics(state, lam_eff, scale, bonus, delta, logits, batch, batch_real, labels)
-    rms = max(reward_scale(state.reward_rms), 1e-8)
-    metrics.update(
-        {
-            "critic_ev": ev if ev is not None else float("nan"),
-            "active": float(active),
-            "potential": float(potential),
-            # |λ·b(s)| / reward scale: the size of the bonus itself (of Φ when shaping);
-            # `bonus_share` is the same for the per-step amount added.
-            "potential_share": float((lam_eff * potential_of).abs().mean() / rms),
-        }
-    )
+    if metrics:
+        rms = max(reward_scale(state.reward_rms), 1e-8)
+        metrics.update(
+            {
+                # |λ·b| / reward scale for the per-step amount added and for the bonus
+                # itself (the potential Φ when shaping).
+                "bonus_share": float(delta.abs().mean() / rms),
+                "potential_share": float((lam_eff * potential_of).abs().mean() / rms),
+                "critic_ev": ev if ev is not None else float("nan"),
+                "active": float(active),
+                "potential": float(potential),
+            }
+        )
     return AsorResult(delta, disc_feats, labels, metrics)
 
 
@@ -296,7 +299,6 @@ def _metrics(
         "aug_reward_min": float(delta.min()),
         "aug_reward_max": float(delta.max()),
         "aug_reward_abs_mean": float(delta.abs().mean()),
-        "bonus_share": float(delta.abs().mean() / max(reward_scale(state.reward_rms), 1e-8)),
         "bonus_mean": float(bonus.mean()),
         "env_reward_mean": float(env_r.mean()),
         "value_mean": float(batch.values.mean()),

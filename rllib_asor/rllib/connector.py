@@ -150,12 +150,13 @@ class AsorRewardConnector(ConnectorV2):
         terminateds = pb.get(Columns.TERMINATEDS)
         terminateds = None if terminateds is None else flat(terminateds).bool()
 
+        next_features = None  # off-policy batches (and PPO with the ensemble) carry s′
+        if Columns.NEXT_OBS in pb:
+            next_features = flatten(select(flat(pb[Columns.NEXT_OBS]), cfg.obs_keys), space)[rows]
         proxy_in = ProxyInputs(features)
         if cfg.needs_proxy and cfg.proxy == "ensemble":
             proxy_in.actions = flatten(flat(pb[Columns.ACTIONS])[rows], policy.action_space)
-            proxy_in.next_features = flatten(
-                select(flat(pb[Columns.NEXT_OBS]), cfg.obs_keys), space
-            )[rows]
+            proxy_in.next_features = next_features
         if cfg.needs_proxy and cfg.proxy == "rnd_per_dynamics":
             proxy_in.dynamics_ids = flat(pb[DYNAMICS_ID])[rows].long()
 
@@ -168,10 +169,8 @@ class AsorRewardConnector(ConnectorV2):
             proxy_inputs=proxy_in,
             terminateds=None if terminateds is None else terminateds[rows],
         )
-        if Columns.NEXT_OBS in pb:  # off-policy: each row is a transition
-            asor_batch.next_features = flatten(
-                select(flat(pb[Columns.NEXT_OBS]), cfg.obs_keys), space
-            )[rows]
+        if next_features is not None:  # each row is a transition
+            asor_batch.next_features = next_features
         elif mask is not None and len(lead) == 1:
             # On-policy: each chunk ends with a bootstrap row (loss mask False) holding s_T,
             # so the row after a valid one is always its next state.
