@@ -150,7 +150,7 @@ class AsorRewardConnector(ConnectorV2):
         terminateds = pb.get(Columns.TERMINATEDS)
         terminateds = None if terminateds is None else flat(terminateds).bool()
 
-        next_features = None  # off-policy batches (and PPO with the ensemble) carry s′
+        next_features = None  # off-policy batches (and PPO with the ensemble proxy) carry s′
         if Columns.NEXT_OBS in pb:
             next_features = flatten(select(flat(pb[Columns.NEXT_OBS]), cfg.obs_keys), space)[rows]
         proxy_in = ProxyInputs(features)
@@ -169,15 +169,15 @@ class AsorRewardConnector(ConnectorV2):
             proxy_inputs=proxy_in,
             terminateds=None if terminateds is None else terminateds[rows],
         )
-        if next_features is not None:  # each row is a transition
-            asor_batch.next_features = next_features
-        elif mask is not None and len(lead) == 1:
-            # On-policy: each chunk ends with a bootstrap row (loss mask False) holding s_T,
-            # so the row after a valid one is always its next state.
+        if mask is not None and len(lead) == 1:
+            # On-policy (PPO's pipeline adds the loss mask): each chunk ends with a bootstrap
+            # row (loss mask False) holding s_T, so the row after a valid one is its next state.
             nxt = rows + 1
             asor_batch.next_features = all_features[nxt]
             asor_batch.next_values = all_values[nxt]
             asor_batch.chunks = self._chunks(episodes, policy_id, valid)
+        else:  # off-policy / offline: each row is a transition with its own s′
+            asor_batch.next_features = next_features
         state = rl_module[ids.disc].unwrapped().state
         proxy = rl_module[ids.proxy].unwrapped().proxy if ids.proxy is not None else None
         result = asor_update(cfg, state, proxy, asor_batch, self._rng)

@@ -297,3 +297,15 @@ def test_robust_bonus_is_scale_free_and_finite_on_a_constant_reward(ray_session)
             assert np.isfinite(asor[key]), key
         shares[scale] = asor["potential_share"]
     assert shares[1.0] > 0 and 0.5 <= shares[100.0] / shares[1.0] <= 2.0
+
+
+def test_robust_ppo_with_the_ensemble_proxy_still_fills_the_archive(ray_session):
+    """PPO batches then carry NEXT_OBS too; the on-policy chunk structure must still be used."""
+    algo = lava_ppo(preset="robust", proxy="ensemble").build_algo()
+    try:
+        for _ in range(3):
+            asor = algo.train()["asor"]
+        assert asor["archive_states"] > 0 and np.isfinite(asor["critic_ev"])
+        assert np.isfinite(asor["ensemble_loss"])
+    finally:
+        algo.stop()
