@@ -11,7 +11,7 @@ if "DISPLAY" not in os.environ:  # headless: MuJoCo's offscreen renderer through
 
 import gymnasium  # noqa: E402
 
-from game_env.course import generate_course  # noqa: E402
+from game_env.generator import generate_course  # noqa: E402
 from game_env.maps import MAPS, NUM_MAPS  # noqa: E402
 from game_env.parallel import RaceParallelEnv, parallel_env  # noqa: E402
 from game_env.spaces import action_space, observation_space  # noqa: E402

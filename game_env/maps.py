@@ -1,6 +1,6 @@
 """The ten maps: layout mix and per-map ranges of every element's behaviour.
 
-A map is a recipe, not a course: ``course.generate_course(map_id, seed)`` draws the actual
+A map is a recipe, not a course: ``generator.generate_course(map_id, seed)`` draws the actual
 values from these ranges. Ranges are (low, high) and drawn uniformly.
 """
 

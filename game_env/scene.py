@@ -20,7 +20,8 @@ from game_env.constants import (
     RACER_RADIUS,
     TIMESTEP,
 )
-from game_env.course import Course, generate_course
+from game_env.course import Course
+from game_env.generator import generate_course
 
 MAX_RACERS = 16
 RACER_COLORS = [

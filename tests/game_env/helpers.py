@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from game_env.constants import FEET
-from game_env.course import generate_course
+from game_env.generator import generate_course
 from game_env.sim import RaceSim
 
 IDLE = np.array([[1, 1, 0, 0, 0, 0, 0, 1]])
