@@ -19,7 +19,7 @@ from game_env.options import (
     first_map,
 )
 from game_env.sim import RaceSim
-from game_env.spaces import REWARD_TERMS, action_space, observation_space
+from game_env.spaces import action_space, observation_space
 
 
 class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
@@ -85,11 +85,10 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
         map's elements are its dynamics) and, at the end, the episode metrics."""
         sim = self.sim
         obs, terms, done, err = sim.step([check_action(action)])
-        tl = terms[0]
-        info: dict[str, Any] = {"reward_terms": dict(zip(REWARD_TERMS, tl, strict=True)),
+        info: dict[str, Any] = {"reward_terms": terms[0],
                                 "map_id": sim.map_id, "dynamics_id": sim.map_id,
                                 "course_seed": sim.course_seed}
-        reward = sum(tl)
+        reward = sum(terms[0].values())
         terminated = bool(done[0])
         truncated = sim.steps >= sim.max_episode_steps
         if err is not None:

@@ -23,7 +23,7 @@ from game_env.options import (
 )
 from game_env.scene import MAX_RACERS
 from game_env.sim import RaceSim
-from game_env.spaces import REWARD_TERMS, action_space, observation_space
+from game_env.spaces import action_space, observation_space
 
 _IDLE = (1, 1, 0, 0, 0, 0, 0, 1)  # what a racer without an action this step does
 
@@ -115,10 +115,9 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
         index = self._index
         for a in live:
             i = index[a]
-            tl = terms[i]
-            info = {"reward_terms": dict(zip(REWARD_TERMS, tl, strict=True)), "map_id": sim.map_id,
+            info = {"reward_terms": terms[i], "map_id": sim.map_id,
                     "dynamics_id": sim.map_id, "course_seed": sim.course_seed}
-            rewards[a] = sum(tl)
+            rewards[a] = sum(terms[i].values())
             terminations[a] = bool(done[i])
             truncations[a] = bool(truncate)
             if err is not None:

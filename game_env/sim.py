@@ -10,6 +10,7 @@ matter (several racers, balloons); floors, belts and tiles are looked up in the 
 from __future__ import annotations
 
 import math
+import operator
 
 import mujoco
 import numpy as np
@@ -31,6 +32,7 @@ from game_env.constants import (
 from game_env.grids import FINE, VOID, CourseGrids, _clip
 from game_env.mechanics import DECEL, Balloons, Hammers, Tiles, Trampolines, knock_speed
 from game_env.scene import load_scene, spawn_offsets
+from game_env.spaces import AGENT_FEATURES, DESTINATION_FEATURES, REWARD_TERMS
 
 STAY_S = 2.0  # stationary this long (moved < STAY_DIST) -> stay penalty
 STAY_DIST = 0.5
@@ -42,6 +44,8 @@ _BAD = (int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQ
         int(mujoco.mjtWarning.mjWARN_BADQACC))
 _DIRS = [(math.cos(k * math.pi / 4), math.sin(k * math.pi / 4)) for k in range(8)]
 _S2 = math.sqrt(0.5)
+_agent_vector = operator.itemgetter(*AGENT_FEATURES)  # named features -> the vector's order
+_destination_vector = operator.itemgetter(*DESTINATION_FEATURES)
 
 
 class Racer:
@@ -122,7 +126,8 @@ class RaceSim:
         self.arch_pos = [(z.cx, z.cy, z.z + FEET) for z in c.archives] + [(c.start[0], c.start[1], c.start[2] + FEET)]
         self.fall_z = c.floor_min - FALL_DEPTH
         self.inv_len = 2.0 / c.length
-        self.dest_static = [math.sin(d.yaw), math.cos(d.yaw), 0.0, d.hx / 10, d.hy / 10, 0.003]
+        self.dest_static = {"yaw_sin": math.sin(d.yaw), "yaw_cos": math.cos(d.yaw), "tilt": 0.0,
+                            "size_x": d.hx / 10, "size_y": d.hy / 10, "size_z": 0.003}
         self.props = list(c.props)
         self.maps = (g.fine_h, g.belt_x, g.belt_y, g.tile_id, g.cliff)
         self.fine = (g.x_min, g.y_min, 1.0 / FINE, g.nx - 1, g.ny - 1)
@@ -177,12 +182,13 @@ class RaceSim:
         return float(self.maps[0][ix, iy]), ix, iy
 
     # --- one env step ------------------------------------------------------------------
-    def step(self, actions) -> tuple[dict[str, np.ndarray], list[list[float]], list[bool], str | None]:
+    def step(self, actions) -> tuple[dict[str, np.ndarray], list[dict[str, float]], list[bool], str | None]:
         """Advance one env step with (N, 8) actions (array or list of lists of valid ints).
 
-        Returns (batched obs, reward terms per racer (N lists of 7 floats in
-        ``spaces.REWARD_TERMS`` order), done per racer (reached the destination this step),
-        physics error message or None). Time limits are the caller's (``self.steps``).
+        Returns (batched obs, reward terms per racer (N fresh dicts keyed by
+        ``spaces.REWARD_TERMS``, in that order; the step reward is their sum), done per racer
+        (reached the destination this step), physics error message or None). Time limits are
+        the caller's (``self.steps``).
         """
         data = self.data
         t0 = data.time
@@ -233,7 +239,8 @@ class RaceSim:
         if self._bad_count() != self._warn:
             self._warn = self._bad_count()
             pos = data.qpos[self.qpos_flat].tolist()
-            return (self._observe(pos, [0.0] * (3 * self.n), [VOID] * self.n), [[0.0] * 7 for _ in self.racers],
+            return (self._observe(pos, [0.0] * (3 * self.n), [VOID] * self.n),
+                    [dict.fromkeys(REWARD_TERMS, 0.0) for _ in self.racers],
                     [False] * self.n, f"MuJoCo physics became unstable at t={data.time:.3f}s (bad qpos/qvel/qacc)")
         return self._after_physics(t0, data.time)
 
@@ -280,129 +287,174 @@ class RaceSim:
                     return True
         return False
 
+    # --- the rules, after the physics step --------------------------------------------------
     def _after_physics(self, t0: float, t1: float):
-        data = self.data
-        pos = data.qpos[self.qpos_flat].tolist()
-        vel = data.qvel[self.qvel_flat].tolist()
+        """Apply the race rules to every racer for the step (t0, t1]; returns ``step``'s tuple."""
+        pos = self.data.qpos[self.qpos_flat].tolist()
+        vel = self.data.qvel[self.qvel_flat].tolist()
         if self.need_contacts:
             self.balloons.touch(self._touched())
-        multi = self.n > 1
-        fine_h, belt_x, belt_y, tile_id, cliff_map = self.maps
+        cliff_map = self.maps[4]
         all_terms, done, floors, cliffs = [], [], [], []
         for i, r in enumerate(self.racers):
-            terms = [0.0] * 7
+            terms = dict.fromkeys(REWARD_TERMS, 0.0)
             all_terms.append(terms)
-            if not r.active:
-                done.append(False)
-                fl, ix, iy = self._floor(pos, i)
-                floors.append(fl)
-                cliffs.append(float(cliff_map[ix, iy]))
-                continue
-            x, y, z = pos[3 * i: 3 * i + 3]
-            vz = vel[3 * i + 2]
-            floor, ix, iy = self._floor(pos, i)
-            feet = z - FEET
-            near = feet - floor < 0.06 and abs(vz) < 1.5
-            grounded = near or (multi and vz < 1.0 and self._on_racer(pos, i))
-            r.grounded = grounded
-            r.on_pad = r.on_tile = False
-            if grounded:
-                r.launched = False
-                r.belt = (float(belt_x[ix, iy]), float(belt_y[ix, iy])) if near else (0.0, 0.0)
-                k = int(tile_id[ix, iy]) if near else -1
-                if k >= 0:
-                    r.on_tile = True
-                    self.tiles.touch(k, t1)
-                if self.tramps.n and vz < 0.5:
-                    p = self.tramps.pad(x, y, feet)
-                    if p >= 0:  # launch along the pad normal
-                        vx_l, vz_l = self.tramps.vel[p]
-                        ax, ay = self.vxy_adr[i]
-                        data.qvel[self.vz_adr[i]] = vz_l
-                        data.qvel[ax] = vx_l
-                        r.carry, r.launched, r.grounded, r.on_pad = (vx_l, 0.0), True, False, True
-                        r.jump_needed = True
-                        grounded = False
-            if self.hammers.n and t1 >= r.knock_until:
-                hit = self.hammers.hit(x, y, feet, t0, t1)
-                if hit is not None:
-                    self.knock(i, hit[0], hit[1], hit[2], t1)
-            if z < self.fall_z:  # fell: respawn at the last archive point
-                terms[4] += R_FALL
-                x, y, z = self._respawn(i, t1)
-                pos[3 * i: 3 * i + 3] = (x, y, z)
-                floor, ix, iy = self._floor(pos, i)
-                feet = z - FEET
-            floors.append(floor)
-            cliff = float(cliff_map[ix, iy])
-            cliffs.append(cliff)
-            if r.in_jump:  # necessary if it crosses void, climbs or clears a hammer
-                if floor < VOID / 2 or (self.hammers.n and self.hammers.near(x, y)):
-                    r.jump_needed = True
-                if grounded and t1 - r.jump_t0 > 0.1:
-                    if not (r.jump_needed or z > r.jump_z0 + 0.3):
-                        r.useless_jumps += 1
-                    r.in_jump = False
-            goal_before = r.next_goal
-            self._zones(r, i, x, y, feet, terms)
-            gx, gy, gz = self.goal_pos[goal_before]
-            terms[3] = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2)) - r.potential
-            gx, gy, gz = self.goal_pos[r.next_goal]
-            r.potential = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2))
-            # Pressing into a wall (a ledge higher than a step just ahead, no progress).
-            dx, dy = r.move
-            if grounded and (dx or dy) and t1 >= r.knock_until:
-                ahead = self._floor([x + 0.5 * dx, y + 0.5 * dy, 0.0], 0)[0]
-                vrel = (vel[3 * i] - r.belt[0]) * dx + (vel[3 * i + 1] - r.belt[1]) * dy
-                r.wall = r.wall + 1 if ahead > feet + 0.35 and vrel < 0.3 * r.speed else 0
-                if r.wall >= WALL_STEPS:
-                    terms[4] += R_FALL
-                    r.wall = 0
+            if r.active:
+                floor, cliff = self._racer_rules(i, r, pos, vel, t0, t1, terms)
+                done.append(r.success)
+                r.active = not r.success  # a racer that arrived leaves the race
             else:
-                r.wall = 0
-            if math.hypot(x - r.anchor[0], y - r.anchor[1]) > STAY_DIST:
-                r.anchor, r.anchor_t = (x, y), t1
-            if t1 - r.anchor_t > STAY_S:
-                terms[5] = R_STAY
-            if x > r.best_x + 0.5:
-                r.best_x, r.best_t = x, t1
-            if not r.success and t1 - r.best_t > TRAPPED_S:
-                r.trapped = True
-            terms[6] = R_TIME
-            if grounded:
-                r.cliff_sum += cliff
-                r.cliff_cnt += 1
-            if self.props and not r.prop:
-                r.prop = any((x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2 < 1.0 for px, py, pz in self.props)
-            r.total_reward += sum(terms)
-            r.goal_reward += terms[0] + terms[1] + terms[2]
-            r.length += 1
-            done.append(r.success)
-            if r.success:
-                r.active = False
-        self.tiles.update(data, t1)
+                floor, ix, iy = self._floor(pos, i)
+                cliff = float(cliff_map[ix, iy])
+                done.append(False)
+            floors.append(floor)
+            cliffs.append(cliff)
+        self.tiles.update(self.data, t1)
         self.last_pos = pos
         return self._observe(pos, vel, floors, cliffs), all_terms, done, None
 
-    def _zones(self, r: Racer, i: int, x: float, y: float, feet: float, terms: list[float]) -> None:
+    def _racer_rules(self, i: int, r: Racer, pos: list[float], vel: list[float], t0: float, t1: float,
+                     terms: dict[str, float]) -> tuple[float, float]:
+        """The rules for active racer ``i``, in order; ``pos`` is updated on a respawn.
+        Returns the floor height and the cliff distance under the racer."""
+        grounded, floor, ix, iy = self._land(i, r, pos, vel[3 * i + 2], t1)
+        x, y, z = pos[3 * i: 3 * i + 3]
+        if self.hammers.n and t1 >= r.knock_until:
+            self._hammer_hit(i, x, y, z - FEET, t0, t1)
+        if z < self.fall_z:  # fell: respawn at the last archive point
+            terms["fall_or_wall"] += R_FALL
+            x, y, z = self._respawn(i, t1)
+            pos[3 * i: 3 * i + 3] = (x, y, z)
+            floor, ix, iy = self._floor(pos, i)
+        feet = z - FEET
+        cliff = float(self.maps[4][ix, iy])
+        if r.in_jump:
+            self._track_jump(r, x, y, z, floor, grounded, t1)
+        goal_before = r.next_goal
+        self._zones(r, i, x, y, feet, terms)
+        self._goal_distance_shaping(r, x, y, z, goal_before, terms)
+        self._wall(r, i, x, y, feet, vel, grounded, t1, terms)
+        self._stay_and_progress(r, x, y, t1, terms)
+        terms["time"] = R_TIME
+        if self.props and not r.prop:
+            r.prop = any((x - px) ** 2 + (y - py) ** 2 + (z - pz) ** 2 < 1.0 for px, py, pz in self.props)
+        self._account(r, grounded, cliff, terms)
+        return floor, cliff
+
+    def _land(self, i: int, r: Racer, pos: list[float], vz: float, t1: float) -> tuple[bool, float, int, int]:
+        """Ground contact of racer ``i``: standing (on the floor or another racer's head), the
+        belt under its feet, a touched tile, a trampoline launch. Returns (grounded after a
+        launch, floor height, fine-grid cell)."""
+        x, y, z = pos[3 * i: 3 * i + 3]
+        floor, ix, iy = self._floor(pos, i)
+        feet = z - FEET
+        near = feet - floor < 0.06 and abs(vz) < 1.5
+        grounded = near or (self.n > 1 and vz < 1.0 and self._on_racer(pos, i))
+        r.grounded = grounded
+        r.on_pad = r.on_tile = False
+        if grounded:
+            r.launched = False
+            _, belt_x, belt_y, tile_id, _ = self.maps
+            r.belt = (float(belt_x[ix, iy]), float(belt_y[ix, iy])) if near else (0.0, 0.0)
+            k = int(tile_id[ix, iy]) if near else -1
+            if k >= 0:
+                r.on_tile = True
+                self.tiles.touch(k, t1)
+            if self.tramps.n and vz < 0.5:
+                p = self.tramps.pad(x, y, feet)
+                if p >= 0:  # launch along the pad normal
+                    vx_l, vz_l = self.tramps.vel[p]
+                    qvel = self.data.qvel
+                    qvel[self.vz_adr[i]] = vz_l
+                    qvel[self.vxy_adr[i][0]] = vx_l
+                    r.carry, r.launched, r.grounded, r.on_pad = (vx_l, 0.0), True, False, True
+                    r.jump_needed = True
+                    grounded = False
+        return grounded, floor, ix, iy
+
+    def _hammer_hit(self, i: int, x: float, y: float, feet: float, t0: float, t1: float) -> None:
+        """Knock racer ``i`` back if a hammer bar swept through it during (t0, t1]."""
+        hit = self.hammers.hit(x, y, feet, t0, t1)
+        if hit is not None:
+            self.knock(i, hit[0], hit[1], hit[2], t1)
+
+    def _track_jump(self, r: Racer, x: float, y: float, z: float, floor: float, grounded: bool,
+                    t1: float) -> None:
+        """A jump is necessary if it crosses void, climbs or clears a hammer; on landing an
+        unnecessary one is counted (episode metric ``unnecessary_jumps``)."""
+        if floor < VOID / 2 or (self.hammers.n and self.hammers.near(x, y)):
+            r.jump_needed = True
+        if grounded and t1 - r.jump_t0 > 0.1:
+            if not (r.jump_needed or z > r.jump_z0 + 0.3):
+                r.useless_jumps += 1
+            r.in_jump = False
+
+    def _zones(self, r: Racer, i: int, x: float, y: float, feet: float, terms: dict[str, float]) -> None:
+        """Archive points, intermediate goals and the destination reached this step."""
         for k, (x0, x1, y0, y1, zz) in enumerate(self.archives):
             if x0 <= x <= x1 and y0 <= y <= y1 and zz - 0.5 < feet < zz + 2.5 and not r.arch_reached[k]:
                 r.arch_reached[k] = True
                 r.last_archive = k
-                terms[0] += R_TARGET
+                terms["arrive_target"] += R_TARGET
                 self.grids.mark_reached(i, "archive", k)
         for k, (x0, x1, y0, y1, zz) in enumerate(self.goals):
             if x0 <= x <= x1 and y0 <= y <= y1 and zz - 0.5 < feet < zz + 2.5 and not r.goal_reached[k]:
                 r.goal_reached[k] = True
-                terms[1] += R_GOAL
+                terms["arrive_goal"] += R_GOAL
                 self.grids.mark_reached(i, "goal", k)
                 r.next_goal = next((j for j, done in enumerate(r.goal_reached) if not done), len(self.goals))
         cx, cy, cz, c, s, hx, hy = self.dest
         lx, ly = (x - cx) * c + (y - cy) * s, -(x - cx) * s + (y - cy) * c
         if abs(lx) <= hx and abs(ly) <= hy and abs(feet - cz) < 1.0:
             r.success = True
-            terms[2] += R_DEST
+            terms["arrive_destination"] += R_DEST
             self.grids.mark_reached(i, "goal", len(self.goals))
+
+    def _goal_distance_shaping(self, r: Racer, x: float, y: float, z: float, goal_before: int,
+                               terms: dict[str, float]) -> None:
+        """Potential-based shaping: change of exp(-DECAY * distance) to the goal the racer was
+        heading for; the potential then moves on to the next goal."""
+        gx, gy, gz = self.goal_pos[goal_before]
+        terms["goal_distance"] = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2)) - r.potential
+        gx, gy, gz = self.goal_pos[r.next_goal]
+        r.potential = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2))
+
+    def _wall(self, r: Racer, i: int, x: float, y: float, feet: float, vel: list[float], grounded: bool,
+              t1: float, terms: dict[str, float]) -> None:
+        """Pressing into a wall (a ledge higher than a step just ahead, no progress) for
+        ``WALL_STEPS`` steps costs the fall penalty."""
+        dx, dy = r.move
+        if grounded and (dx or dy) and t1 >= r.knock_until:
+            ahead = self._floor([x + 0.5 * dx, y + 0.5 * dy, 0.0], 0)[0]
+            vrel = (vel[3 * i] - r.belt[0]) * dx + (vel[3 * i + 1] - r.belt[1]) * dy
+            r.wall = r.wall + 1 if ahead > feet + 0.35 and vrel < 0.3 * r.speed else 0
+            if r.wall >= WALL_STEPS:
+                terms["fall_or_wall"] += R_FALL
+                r.wall = 0
+        else:
+            r.wall = 0
+
+    def _stay_and_progress(self, r: Racer, x: float, y: float, t1: float, terms: dict[str, float]) -> None:
+        """Stay penalty after ``STAY_S`` within ``STAY_DIST``; trapped after ``TRAPPED_S``
+        without new best progress."""
+        if math.hypot(x - r.anchor[0], y - r.anchor[1]) > STAY_DIST:
+            r.anchor, r.anchor_t = (x, y), t1
+        if t1 - r.anchor_t > STAY_S:
+            terms["stay"] = R_STAY
+        if x > r.best_x + 0.5:
+            r.best_x, r.best_t = x, t1
+        if not r.success and t1 - r.best_t > TRAPPED_S:
+            r.trapped = True
+
+    @staticmethod
+    def _account(r: Racer, grounded: bool, cliff: float, terms: dict[str, float]) -> None:
+        """Running episode metrics: cliff distance while grounded, rewards, length."""
+        if grounded:
+            r.cliff_sum += cliff
+            r.cliff_cnt += 1
+        r.total_reward += sum(terms.values())
+        r.goal_reward += terms["arrive_target"] + terms["arrive_goal"] + terms["arrive_destination"]
+        r.length += 1
 
     def _respawn(self, i: int, t: float) -> tuple[float, float, float]:
         r = self.racers[i]
@@ -437,20 +489,47 @@ class RaceSim:
             gx, gy, gz = gx - x, gy - y, gz - z
             feet = z - FEET
             fl = floors[i]
-            rows.append([
-                x * self.inv_len - 1.0, y * 0.1, z * 0.1, math.sin(r.yaw), math.cos(r.yaw),
-                vx * 0.1, vy * 0.1, vz * 0.1, g, not g and vz > 0, not g and vz <= 0, t < r.knock_until,
-                g and (r.belt[0] != 0.0 or r.belt[1] != 0.0), r.on_pad, r.on_tile, r.sprint,
-                r.belt[0] * 0.2, r.belt[1] * 0.2, (ax - x) * 0.05, (ay - y) * 0.05, (az - z) * 0.05,
-                gx * 0.05, gy * 0.05, gz * 0.05, math.sqrt(gx * gx + gy * gy + gz * gz) * 0.02,
-                1.0 if fl < VOID / 2 else (feet - fl) * 0.2, (cliffs[i] if cliffs is not None else self._cliff(pos, i)) * 0.2,
-                r.next_goal / ng if ng else 0.0, tf, r.prop, max(r.ready_t - t, 0.0) / COOLDOWN,
-                (t - r.anchor_t) / STAY_S, (cx - x) * 0.01, (cy - y) * 0.01, (cz - feet) * 0.01,
-            ] + self.dest_static)
+            agent = {
+                "progress_x": x * self.inv_len - 1.0,
+                "pos_y": y * 0.1,
+                "pos_z": z * 0.1,
+                "yaw_sin": math.sin(r.yaw),
+                "yaw_cos": math.cos(r.yaw),
+                "vel_x": vx * 0.1,
+                "vel_y": vy * 0.1,
+                "vel_z": vz * 0.1,
+                "grounded": g,
+                "jumping": not g and vz > 0,
+                "falling": not g and vz <= 0,
+                "knocked": t < r.knock_until,
+                "on_conveyor": g and (r.belt[0] != 0.0 or r.belt[1] != 0.0),
+                "on_trampoline": r.on_pad,
+                "on_collapsing": r.on_tile,
+                "sprinting": r.sprint,
+                "belt_vel_x": r.belt[0] * 0.2,
+                "belt_vel_y": r.belt[1] * 0.2,
+                "archive_dx": (ax - x) * 0.05,
+                "archive_dy": (ay - y) * 0.05,
+                "archive_dz": (az - z) * 0.05,
+                "next_goal_dx": gx * 0.05,
+                "next_goal_dy": gy * 0.05,
+                "next_goal_dz": gz * 0.05,
+                "next_goal_dist": math.sqrt(gx * gx + gy * gy + gz * gz) * 0.02,
+                "height_above_floor": 1.0 if fl < VOID / 2 else (feet - fl) * 0.2,
+                "distance_from_cliff": (cliffs[i] if cliffs is not None else self._cliff(pos, i)) * 0.2,
+                "goals_fraction": r.next_goal / ng if ng else 0.0,
+                "time_fraction": tf,
+                "prop_held": r.prop,
+                "cooldown": max(r.ready_t - t, 0.0) / COOLDOWN,
+                "stay_fraction": (t - r.anchor_t) / STAY_S,
+            }
+            dest = {"dx": (cx - x) * 0.01, "dy": (cy - y) * 0.01, "dz": (cz - feet) * 0.01, **self.dest_static}
+            rows.append(_agent_vector(agent) + _destination_vector(dest))
         vec = np.array(rows, np.float32)
         _clip(vec, -1.0, 1.0, out=vec)
+        na = len(AGENT_FEATURES)
         return {"terrain": grid[:, 0:4], "items": grid[:, 4:6], "targets": grid[:, 6:9], "goals": grid[:, 9:12],
-                "agent": vec[:, :32], "destination": vec[:, 32:]}
+                "agent": vec[:, :na], "destination": vec[:, na:]}
 
     def _cliff(self, pos: list[float], i: int) -> float:
         _, ix, iy = self._floor(pos, i)

@@ -72,13 +72,13 @@ def test_fall_respawns_at_last_archive_point_with_fall_penalty():
 
     place(sim, arch.cx, arch.cy, arch.z + 0.01)
     _, terms, _, _ = sim.step(IDLE)
-    assert terms[0][0] == 1.0 and sim.racers[0].last_archive == 0
+    assert terms[0]["arrive_target"] == 1.0 and sim.racers[0].last_archive == 0
     place(sim, arch.cx, sim.course.width, arch.z + 0.5)  # beside the course: falls
     fall = None
     for _ in range(100):
         _, terms, _, _ = sim.step(IDLE)
-        if terms[0][4] < 0:
-            fall = terms[0][4]
+        if terms[0]["fall_or_wall"] < 0:
+            fall = terms[0]["fall_or_wall"]
             break
     assert fall == -1.0
     assert np.hypot(*(sim.pos[0, :2] - [arch.cx, arch.cy])) < 1.5

@@ -24,8 +24,8 @@ def test_standing_still_costs_stay_and_time_then_trapped():
     stays, times = [], []
     for _ in range(int(11.0 / 0.04)):
         _, terms, _, _ = sim.step(IDLE)
-        stays.append(terms[0][5])
-        times.append(terms[0][6])
+        stays.append(terms[0]["stay"])
+        times.append(terms[0]["time"])
     assert all(t == -0.02 for t in times)
     assert stays[10] == 0.0 and stays[-1] == -0.01  # penalised only after 2 s
     assert sim.episode_metrics(0)["trapped"] == 1.0
@@ -41,15 +41,15 @@ def test_pressing_into_a_ledge_gets_the_wall_penalty():
     a = c.surfaces[k]
     place(sim, a.x1 - 0.5, 0.0, a.z1)
     push = np.array([[2, 1, 0, 0, 0, 0, 0, 0]])
-    walls = [sim.step(push)[1][0][4] for _ in range(30)]
+    walls = [sim.step(push)[1][0]["fall_or_wall"] for _ in range(30)]
     assert walls.count(-1.0) == 1
 
 
 def test_goal_distance_term_rewards_progress():
     sim = sim_at(0, 0, 0.0, 0.0, 0.0)
     run = np.array([[2, 1, 0, 0, 0, 0, 0, 0]])
-    gains = [sim.step(run)[1][0][3] for _ in range(20)]
-    back = [sim.step(np.array([[0, 1, 0, 0, 0, 0, 0, 0]]))[1][0][3] for _ in range(20)]
+    gains = [sim.step(run)[1][0]["goal_distance"] for _ in range(20)]
+    back = [sim.step(np.array([[0, 1, 0, 0, 0, 0, 0, 0]]))[1][0]["goal_distance"] for _ in range(20)]
     assert sum(gains) > 0 > sum(back)
 
 
