@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-import warnings
 from typing import Any
 
 import numpy as np
@@ -11,18 +10,10 @@ from gymnasium import spaces as gym_spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from game_env.base import RaceSimEnvMixin
 from game_env.constants import FRAME_SKIP
-from game_env.options import (
-    check_action,
-    check_course_seed,
-    check_map_choice,
-    check_positive_int,
-    check_render_mode,
-    first_map,
-)
+from game_env.env_mixin import RaceSimEnvMixin
+from game_env.options import check_action, check_positive_int
 from game_env.scene import MAX_RACERS
-from game_env.sim import RaceSim
 from game_env.spaces import action_space, observation_space
 
 _IDLE = (1, 1, 0, 0, 0, 0, 0, 1)  # what a racer without an action this step does
@@ -49,20 +40,11 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
         height: int = 240,
     ) -> None:
         self.num_racers = check_positive_int("num_racers", num_racers, 1, MAX_RACERS)
-        self._map_choice = check_map_choice(map_id)
-        self._course_seed = check_course_seed(course_seed)
-        self.frame_skip = check_positive_int("frame_skip", frame_skip, 1, 1000)
-        self.max_episode_steps = check_positive_int("max_episode_steps", max_episode_steps)
-        self.render_mode = check_render_mode(render_mode)
-        self.width = check_positive_int("width", width, 16, 4096)
-        self.height = check_positive_int("height", height, 16, 4096)
+        self.max_episode_steps = self._setup(self.num_racers, map_id, course_seed, max_episode_steps, frame_skip,
+                                             render_mode, width, height)
         self.possible_agents = [f"racer_{i}" for i in range(self.num_racers)]
         self.agents: list[str] = []
-        self.sim = RaceSim(self.num_racers, self.frame_skip, self.max_episode_steps)
         self._rng, _ = seeding.np_random(None)
-        self.sim.load(first_map(self._map_choice), 0 if self._course_seed is None else self._course_seed)  # model/data exist
-        self.sim.reset()
-        self._renderer = None
         self._index = {a: i for i, a in enumerate(self.possible_agents)}
         self._live: set[str] = set()
 
@@ -82,11 +64,11 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
         """Start an episode: every racer on the start pad (``options`` as the Gymnasium env)."""
         if seed is not None:
             self._rng, _ = seeding.np_random(seed)
-        map_id, cseed = self._load_course(self._rng, options)
+        self._load_course(self._rng, options)
         obs = self.sim.reset()
         self.agents = list(self.possible_agents)
         self._live = set(self.agents)
-        info = {"map_id": map_id, "dynamics_id": map_id, "course_seed": cseed}
+        info = self._course_info()
         return self._split(obs, self.agents), {a: dict(info) for a in self.agents}
 
     def _split(self, obs: dict[str, np.ndarray], agents: list[str]) -> dict[str, dict[str, np.ndarray]]:
@@ -109,19 +91,15 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
         obs, terms, done, err = sim.step(acts)
         live = self.agents
         truncate = sim.steps >= self.max_episode_steps or err is not None
-        if err is not None:
-            warnings.warn(err, RuntimeWarning, stacklevel=2)
+        self._warn_physics(err)
         rewards, terminations, truncations, infos = {}, {}, {}, {}
         index = self._index
         for a in live:
             i = index[a]
-            info = {"reward_terms": terms[i], "map_id": sim.map_id,
-                    "dynamics_id": sim.map_id, "course_seed": sim.course_seed}
+            info = self._step_info(terms[i], err)
             rewards[a] = sum(terms[i].values())
             terminations[a] = bool(done[i])
             truncations[a] = bool(truncate)
-            if err is not None:
-                info["physics_error"] = err
             if terminations[a] or truncations[a]:
                 info["episode_metrics"] = sim.episode_metrics(i)
             infos[a] = info
@@ -134,12 +112,6 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
         """An RGB frame chasing the leading racer, when ``render_mode="rgb_array"``."""
         pos = self.sim.pos
         return self._chase_frame(pos[int(np.argmax(pos[:, 0]))])
-
-    def close(self) -> None:
-        """Free the renderer."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
 
 
 def parallel_env(num_racers: int = 4, map_id: int | list[int] | str | None = 0, **kwargs: Any) -> RaceParallelEnv:

@@ -142,6 +142,39 @@ def _multi(num_racers: int, map_id: Any, seed: int, steps: int, scripted: int = 
     return d.result()
 
 
+def _blow_up(multi: bool) -> dict[str, Any]:
+    """A physics blow-up mid-episode: the truncating step, its warning (where it points), and
+    the episode after a reset."""
+    import warnings
+
+    import game_env
+    from game_env.env import ObstacleRaceEnv
+
+    d = _Digest()
+    rng = np.random.default_rng(21)
+    env = game_env.parallel_env(num_racers=2, map_id=1, course_seed=4) if multi else ObstacleRaceEnv(map_id=0)
+    d.add(env.reset(seed=3))
+    for k in range(60):
+        if k == 20:
+            if multi:
+                env.data.qpos[1] = np.inf
+            else:
+                env.data.qvel[0] = np.nan
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            if multi:
+                out = env.step({a: rng.integers(0, env.action_space(a).nvec) for a in env.agents})
+            else:
+                out = env.step(rng.integers(0, env.action_space.nvec))
+        d.add(out, [(w.category.__name__, str(w.message), Path(w.filename).name) for w in caught])
+        for reward, info in zip(*((out[1].values(), out[4].values()) if multi else ([out[1]], [out[4]])), strict=True):
+            d.note(reward, info)
+        if (not env.agents) if multi else (out[2] or out[3]):
+            d.add("reset", env.reset())
+    env.close()
+    return d.result()
+
+
 def _errors() -> dict[str, Any]:
     """The exception type and message of each rejected argument, for both envs."""
     import game_env
@@ -199,6 +232,8 @@ SCENARIOS: dict[str, Callable[[], dict[str, Any]]] = {
     "multi 4 map7 random": lambda: _multi(4, 7, 9, 300),
     "multi 3 map3 scripted+forward": lambda: _multi(3, 3, 10, 700, scripted=2, policy="forward"),
     "multi 2 any-map random, short": lambda: _multi(2, None, 11, 300, max_steps=90),
+    "single physics blow-up": lambda: _blow_up(False),
+    "multi physics blow-up": lambda: _blow_up(True),
 }
 
 
