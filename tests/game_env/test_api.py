@@ -163,3 +163,23 @@ def test_make_with_max_episode_steps_truncates_with_metrics():
     term, trunc, info = ends[-1]
     assert trunc and not term
     assert info["episode_metrics"]["episode_length"] == 25.0
+
+
+def test_agent_and_destination_vectors_follow_the_names_in_spaces():
+    from game_env.spaces import AGENT_FEATURES, DESTINATION_FEATURES, OBS_SHAPES
+
+    assert OBS_SHAPES["agent"] == (len(AGENT_FEATURES),)
+    assert OBS_SHAPES["destination"] == (len(DESTINATION_FEATURES),)
+    env = ObstacleRaceEnv(map_id=0, course_seed=0, max_episode_steps=100)
+    obs, _ = env.reset(seed=0)
+    agent = dict(zip(AGENT_FEATURES, obs["agent"], strict=True))
+    dest = dict(zip(DESTINATION_FEATURES, obs["destination"], strict=True))
+    assert agent["grounded"] == 1.0 and agent["jumping"] == agent["falling"] == 0.0
+    assert agent["time_fraction"] == 0.0 and agent["progress_x"] == pytest.approx(-1.0, abs=0.05)
+    d = env.sim.course.destination
+    assert dest["size_x"] == pytest.approx(d.hx / 10) and dest["dx"] > 0
+    for _ in range(10):
+        obs, *_ = env.step([2, 1, 0, 1, 0, 0, 0, 0])  # sprint along +x
+    agent = dict(zip(AGENT_FEATURES, obs["agent"], strict=True))
+    assert agent["time_fraction"] == pytest.approx(0.1)
+    assert agent["sprinting"] == 1.0 and agent["vel_x"] > 0.3 and agent["yaw_cos"] == 1.0
