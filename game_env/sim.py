@@ -193,46 +193,11 @@ class RaceSim:
         data = self.data
         t0 = data.time
         half = 0.5 * self.frame_skip * self.model.opt.timestep
-        qvel = data.qvel
         ctrl = []
         if isinstance(actions, np.ndarray):
             actions = actions.tolist()
         for i, (r, a) in enumerate(zip(self.racers, actions, strict=True)):
-            if not r.active:
-                ctrl += (0.0, 0.0)
-                continue
-            mx, my = (0, 0) if a[7] else (a[0] - 1, a[1] - 1)
-            if mx or my:
-                s = _S2 if mx and my else 1.0
-                dx, dy = mx * s, my * s
-                r.yaw = math.atan2(my, mx)
-                r.sprint = a[3] == 1
-            else:
-                dx = dy = 0.0
-                r.sprint = False
-            spd = SPRINT_SPEED if r.sprint else RUN_SPEED
-            r.move, r.speed = (dx, dy), spd
-            knocked = t0 < r.knock_until
-            ready = t0 >= r.ready_t and not knocked
-            if ready and a[5] and r.prop:
-                ux, uy = _DIRS[a[6]]
-                r.dash_vel, r.dash_until, r.prop, r.ready_t = (DASH_SPEED * ux, DASH_SPEED * uy), t0 + DASH_TIME, False, t0 + COOLDOWN
-            if knocked:  # slide with emulated friction (the racer's contacts are frictionless)
-                v = max(r.knock_v0 - DECEL * (t0 + half - r.knock_t0), 0.0)
-                tx, ty = r.knock_dir[0] * v, r.knock_dir[1] * v
-            elif t0 < r.dash_until:
-                tx, ty = r.dash_vel
-            else:
-                bx, by = r.belt if r.grounded else (r.carry if r.launched else (0.0, 0.0))
-                tx, ty = bx + dx * spd, by + dy * spd
-            if ready and a[2] and r.grounded:
-                qvel[self.vz_adr[i]] = JUMP_SPEED
-                r.grounded, r.ready_t, r.in_jump, r.jump_needed = False, t0 + COOLDOWN, True, False
-                r.jumps += 1
-                r.jump_z0, r.jump_t0 = self.last_pos[3 * i + 2], t0
-            if ready and a[4] and self.n > 1:
-                self._attack(i, t0)
-            ctrl += (tx, ty)
+            ctrl += self._control(i, r, a, t0, half) if r.active else (0.0, 0.0)
         data.ctrl[:] = ctrl  # actuators are (racer0 x, racer0 y, racer1 x, ...)
         mujoco.mj_step(self.model, data, nstep=self.frame_skip)
         self.steps += 1
@@ -243,6 +208,43 @@ class RaceSim:
                     [dict.fromkeys(REWARD_TERMS, 0.0) for _ in self.racers],
                     [False] * self.n, f"MuJoCo physics became unstable at t={data.time:.3f}s (bad qpos/qvel/qacc)")
         return self._after_physics(t0, data.time)
+
+    def _control(self, i: int, r: Racer, a: list[int], t0: float, half: float) -> tuple[float, float]:
+        """Apply active racer ``i``'s action ``a`` at time ``t0`` (move, sprint, dash, jump,
+        attack); returns its horizontal velocity target for the step (``half``: half a step,
+        in s)."""
+        mx, my = (0, 0) if a[7] else (a[0] - 1, a[1] - 1)
+        if mx or my:
+            s = _S2 if mx and my else 1.0
+            dx, dy = mx * s, my * s
+            r.yaw = math.atan2(my, mx)
+            r.sprint = a[3] == 1
+        else:
+            dx = dy = 0.0
+            r.sprint = False
+        spd = SPRINT_SPEED if r.sprint else RUN_SPEED
+        r.move, r.speed = (dx, dy), spd
+        knocked = t0 < r.knock_until
+        ready = t0 >= r.ready_t and not knocked
+        if ready and a[5] and r.prop:
+            ux, uy = _DIRS[a[6]]
+            r.dash_vel, r.dash_until, r.prop, r.ready_t = (DASH_SPEED * ux, DASH_SPEED * uy), t0 + DASH_TIME, False, t0 + COOLDOWN
+        if knocked:  # slide with emulated friction (the racer's contacts are frictionless)
+            v = max(r.knock_v0 - DECEL * (t0 + half - r.knock_t0), 0.0)
+            tx, ty = r.knock_dir[0] * v, r.knock_dir[1] * v
+        elif t0 < r.dash_until:
+            tx, ty = r.dash_vel
+        else:
+            bx, by = r.belt if r.grounded else (r.carry if r.launched else (0.0, 0.0))
+            tx, ty = bx + dx * spd, by + dy * spd
+        if ready and a[2] and r.grounded:
+            self.data.qvel[self.vz_adr[i]] = JUMP_SPEED
+            r.grounded, r.ready_t, r.in_jump, r.jump_needed = False, t0 + COOLDOWN, True, False
+            r.jumps += 1
+            r.jump_z0, r.jump_t0 = self.last_pos[3 * i + 2], t0
+        if ready and a[4] and self.n > 1:
+            self._attack(i, t0)
+        return tx, ty
 
     def _attack(self, i: int, t: float) -> None:
         pos = self.last_pos
