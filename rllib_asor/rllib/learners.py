@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 import torch
 from ray.rllib.algorithms.cql.torch.cql_torch_learner import CQLTorchLearner
 from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
@@ -25,6 +26,7 @@ from ray.rllib.connectors.learner.add_next_observations_from_episodes_to_train_b
 )
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.models.base import ENCODER_OUT
+from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 from rllib_asor.asor.config import AsorConfig
@@ -34,6 +36,7 @@ from rllib_asor.rllib.connector import (
     AuxModuleIds,
     critic_values,
 )
+from rllib_asor.rllib.replay import FlatTransitions
 
 DISC_PREFIX = "asor_disc."
 PROXY_PREFIX = "asor_proxy."
@@ -188,9 +191,49 @@ class _SoftQAsorMixin(AsorLearnerMixin):
         return losses
 
 
-class AsorSACTorchLearner(_SoftQAsorMixin, SACTorchLearner):
+class FastSACLearnerMixin:
+    """Builds the train batch straight from `FlatReplayBuffer` samples (`FlatTransitions`),
+    skipping the learner connector's per-episode walk; other data goes the usual way.
+
+    The batch has exactly the columns RLlib's SAC pipeline makes for n_step 1 (obs, new_obs,
+    actions, rewards, terminateds, truncateds, n_step = 1, weights = 1), as torch tensors on
+    the Learner's device. `_flat_batch_hook` lets ASOR rewrite it (rllib_asor/rllib/fast_sac.py).
+    """
+
+    def _make_batch_if_necessary(self, training_data: Any) -> Any:
+        episodes = training_data.episodes
+        if not episodes or not all(isinstance(e, FlatTransitions) for e in episodes):
+            return super()._make_batch_if_necessary(training_data)  # type: ignore[misc]
+        policies = [m for m in self.module.keys() if not is_aux_module(m)]  # type: ignore[attr-defined]
+        if len(policies) != 1:
+            raise ValueError(f"FlatReplayBuffer batches are single-agent; modules: {policies}")
+        cols = episodes[0].columns
+        if len(episodes) > 1:
+            cols = {k: np.concatenate([e.columns[k] for e in episodes]) for k in cols}
+        device = self._device  # type: ignore[attr-defined]
+        n = len(cols[Columns.REWARDS])
+        pb = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device) for k, v in cols.items()}
+        pb["n_step"] = torch.ones(n, dtype=torch.int64, device=device)
+        pb["weights"] = torch.ones(n, dtype=torch.float32, device=device)
+        batch = self._flat_batch_hook({policies[0]: pb})
+        return MultiAgentBatch({mid: SampleBatch(b) for mid, b in batch.items()}, env_steps=n)
+
+    def _flat_batch_hook(self, batch: dict[str, Any]) -> dict[str, Any]:
+        return batch
+
+
+class FastSACTorchLearner(FastSACLearnerMixin, SACTorchLearner):
+    """RLlib's SAC Learner that also reads `FlatReplayBuffer` batches (`fast_off_policy`)."""
+
+
+class AsorSACTorchLearner(FastSACLearnerMixin, _SoftQAsorMixin, SACTorchLearner):
     """SAC's torch Learner with ASOR; with `n_step > 1` the bonus is added to the n-step sum
-    once (for s_t), an approximation of Σ γ^k λ·b(s_{t+k})."""
+    once (for s_t), an approximation of Σ γ^k λ·b(s_{t+k}). On the fast path (FlatReplayBuffer)
+    the ASOR piece runs on the batch built from the buffer's columns."""
+
+    def _flat_batch_hook(self, batch: dict[str, Any]) -> dict[str, Any]:
+        self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)
+        return batch
 
 
 class AsorCQLTorchLearner(_SoftQAsorMixin, CQLTorchLearner):

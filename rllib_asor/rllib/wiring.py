@@ -6,7 +6,10 @@ What it wires in:
   in the MultiRLModule (`asor_disc.<policy>`, `asor_proxy.<policy>`),
 - the validated settings in `learner_config_dict["asor"]` (pickled into every Learner and
   checkpoint),
-- a callback that lifts the Learner's ASOR statistics to `asor/...` in the results.
+- a callback that lifts the Learner's ASOR statistics to `asor/...` in the results,
+- for SAC and CQL the fast off-policy path (`fast_off_policy`, rllib_asor/rllib/fast_sac.py:
+  concat-MLP critics, flat replay buffer, batch built without the connector walk), unless
+  `learner_config_dict["fast_off_policy"]` is False.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from rllib_asor.asor.config import ALGORITHMS, AsorConfig
 from rllib_asor.rllib.callbacks import AsorMetricsCallback, add_callbacks
 from rllib_asor.rllib.envs import register_with_tune
+from rllib_asor.rllib.fast_sac import FAST_KEY, fast_off_policy
 from rllib_asor.rllib.learners import (
     AsorCQLTorchLearner,
     AsorPPOTorchLearner,
@@ -79,6 +83,8 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
     config = config.copy(copy_frozen=False)
     if isinstance(config.env, str):
         register_with_tune(config.env)  # remote env runners can then build our env ids
+    if algo in ("SAC", "CQL") and _wants_fast_path(config, asor):
+        config = fast_off_policy(config)
     asor_dict = asor.to_dict()
     config.rl_module(rl_module_spec=_module_spec(config, asor))
     config.learners(
@@ -89,6 +95,15 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
     if config.is_multi_agent and config.policies_to_train is not None:
         config.multi_agent(policies_to_train=_AlsoTrainAux(config.policies_to_train))
     return config
+
+
+def _wants_fast_path(config: AlgorithmConfig, asor: AsorConfig) -> bool:
+    """SAC/CQL get the fast off-policy path (rllib_asor/rllib/fast_sac.py) unless the config
+    opts out (`learner_config_dict["fast_off_policy"] = False`) or the proxy needs per-step
+    infos, which the flat replay buffer does not keep (`rnd_per_dynamics`)."""
+    if (config.learner_config_dict or {}).get(FAST_KEY) is False:
+        return False
+    return not (asor.needs_proxy and asor.proxy == "rnd_per_dynamics")
 
 
 class _AlsoTrainAux:

@@ -1,0 +1,216 @@
+"""The fast off-policy path for SAC and CQL (issue 11): what it changes and why.
+
+Profiled on Hopper (one local env, 256x256 networks, batch 256, one gradient step per env step;
+docs/results.md, "Fast experiments: SAC speed"), a stock RLlib 2.60 SAC gradient step cost
+~160 ms where Stable-Baselines3 spends ~18 ms on a whole env step + update. The time went to:
+
+1. **The critic network.** For Box actions RLlib's `SACCatalog` builds each Q network as a
+   multi-stream encoder: an obs MLP (obs→256→256), an action MLP (act→256→256) and dense
+   "fusion" layers (512→256, 768→256, 768→256) before the head: ~5x the multiply-adds of the
+   concat MLP (obs⊕act→256→256→1) that SAC papers, SB3 and CleanRL use, ×6 critic passes
+   per step (twin, target, policy term). `FastSACCatalog` builds that concat MLP
+   (`fcnet_hiddens` sets its layers; the policy network is unchanged).
+2. **Replay.** `EpisodeReplayBuffer` slices a one-step episode per sampled transition;
+   `rllib_asor.rllib.replay.FlatReplayBuffer` samples rows of flat arrays instead
+   (`replay_buffer_config: {type: EpisodeReplayBuffer, storage: flat}` + `FlatReplayCallback`,
+   because RLlib's SAC validation accepts only its own buffer type names).
+3. **The learner connector** walks those 256 episodes to build the batch; our Learners
+   (`FastSACLearnerMixin`) build the batch from the buffer's columns directly (ASOR's piece
+   then runs on that batch).
+4. **Sampling one env step per training step** (RLlib's `rollout_fragment_length="auto"` is
+   n_step = 1 for SAC): each training step paid for a sampling call, metrics and a weight sync.
+   The fast path samples `FRAGMENT` steps per training step and keeps the update-to-data ratio
+   (training_intensity rescaled), so the acting policy is at most `FRAGMENT` updates old
+   (SB3's `train_freq`).
+
+`fast_off_policy(config)` switches all of it on for a SAC or CQL config; `with_asor` calls it
+for SAC and CQL unless `learner_config_dict["fast_off_policy"]` is False. The tuned examples
+name the module and the buffer in YAML. Everything is a regular RLlib extension point
+(RLModule/catalog class, replay buffer class, Learner class), so checkpoints, Tune and
+remote Learners work as before.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import gymnasium as gym
+import torch
+from ray.rllib.algorithms.cql.torch.default_cql_torch_rl_module import DefaultCQLTorchRLModule
+from ray.rllib.algorithms.sac.sac_catalog import SACCatalog
+from ray.rllib.algorithms.sac.torch.default_sac_torch_rl_module import DefaultSACTorchRLModule
+from ray.rllib.callbacks.callbacks import RLlibCallback
+from ray.rllib.core.columns import Columns
+from ray.rllib.core.models.base import ENCODER_OUT
+from ray.rllib.core.models.configs import MLPEncoderConfig
+from ray.rllib.core.models.torch.encoder import TorchMLPEncoder
+from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
+from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+
+from rllib_asor.rllib.callbacks import add_callbacks
+
+logger = logging.getLogger(__name__)
+
+FRAGMENT = 16
+"""Env steps per env runner and training step on the fast path (RLlib's SAC default: 1)."""
+FAST_KEY = "fast_off_policy"
+"""`learner_config_dict` key: True once `fast_off_policy` ran, False opts `with_asor` out."""
+FLAT_STORAGE = "flat"
+"""`replay_buffer_config["storage"]` that makes `FlatReplayCallback` install `FlatReplayBuffer`
+(RLlib's SAC validation accepts only its own buffer type names, so the type stays
+`EpisodeReplayBuffer`, which ignores the extra key)."""
+
+
+class FlatReplayCallback(RLlibCallback):
+    """Swaps the Algorithm's fresh `EpisodeReplayBuffer` for a `FlatReplayBuffer` of the same
+    capacity when `replay_buffer_config["storage"] == "flat"` (before any sample is stored;
+    a checkpoint restore then fills the new buffer)."""
+
+    def on_algorithm_init(self, *, algorithm: Any, **kwargs: Any) -> None:
+        install_flat_buffer(algorithm)
+
+
+def install_flat_buffer(algorithm: Any) -> bool:
+    """Install `FlatReplayBuffer` on `algorithm` if its config asks for it; True if done."""
+    from ray.rllib.utils.replay_buffers.episode_replay_buffer import EpisodeReplayBuffer
+
+    from rllib_asor.rllib.replay import FlatReplayBuffer
+
+    rb = algorithm.config.replay_buffer_config or {}
+    current = getattr(algorithm, "local_replay_buffer", None)
+    if rb.get("storage") != FLAT_STORAGE or type(current) is not EpisodeReplayBuffer:
+        return False
+    algorithm.local_replay_buffer = FlatReplayBuffer(
+        capacity=int(rb.get("capacity", 1_000_000)), seed=rb.get("seed")
+    )
+    return True
+
+
+class ConcatQEncoder(TorchMLPEncoder):
+    """Q encoder of the SAC papers / SB3 / CleanRL: one MLP on [obs, action]."""
+
+    def _forward(self, inputs: dict, **kwargs: Any) -> dict:
+        obs = inputs[Columns.OBS]
+        x = torch.cat([obs.reshape(obs.shape[0], -1), inputs[Columns.ACTIONS]], dim=-1)
+        return {ENCODER_OUT: self.net(x)}
+
+
+class FastSACCatalog(SACCatalog):
+    """`SACCatalog` whose continuous-action Q networks are concat MLPs (`ConcatQEncoder`).
+
+    Falls back to RLlib's multi-stream Q encoder for non-flat (image, dict) observations."""
+
+    def _build_qf_encoder_continuous(self, framework: str) -> Any:
+        obs_space, enc = self.observation_space, self._encoder_config
+        if not (
+            framework == "torch"
+            and isinstance(obs_space, gym.spaces.Box)
+            and len(obs_space.shape) == 1
+            and type(enc) is MLPEncoderConfig
+        ):
+            return super()._build_qf_encoder_continuous(framework)
+        act_dim = int(self.action_space.shape[0])
+        self.qf_encoder_config = MLPEncoderConfig(
+            input_dims=[int(obs_space.shape[0]) + act_dim],
+            hidden_layer_dims=enc.hidden_layer_dims,
+            hidden_layer_activation=enc.hidden_layer_activation,
+            hidden_layer_weights_initializer=enc.hidden_layer_weights_initializer,
+            hidden_layer_weights_initializer_config=enc.hidden_layer_weights_initializer_config,
+            hidden_layer_bias_initializer=enc.hidden_layer_bias_initializer,
+            hidden_layer_bias_initializer_config=enc.hidden_layer_bias_initializer_config,
+            output_layer_dim=enc.output_layer_dim,
+            output_layer_activation=enc.output_layer_activation,
+        )
+        return ConcatQEncoder(self.qf_encoder_config)
+
+
+class FastSACTorchRLModule(DefaultSACTorchRLModule):
+    """RLlib's SAC module with `FastSACCatalog` (concat-MLP critics) unless told otherwise."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs["catalog_class"] = kwargs.get("catalog_class") or FastSACCatalog
+        super().__init__(*args, **kwargs)
+
+
+class FastCQLTorchRLModule(DefaultCQLTorchRLModule):
+    """RLlib's CQL module with `FastSACCatalog` (concat-MLP critics)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs["catalog_class"] = kwargs.get("catalog_class") or FastSACCatalog
+        super().__init__(*args, **kwargs)
+
+
+_STOCK_MODULES = (None, DefaultSACTorchRLModule, DefaultCQLTorchRLModule)
+
+
+def _fast_module_class(algo: str) -> type:
+    return FastCQLTorchRLModule if algo == "CQL" else FastSACTorchRLModule
+
+
+def _set_module_class(config: Any, algo: str) -> None:
+    """Give every policy spec that uses RLlib's default SAC/CQL module our fast module."""
+    fast = _fast_module_class(algo)
+    spec = config._rl_module_spec
+    if spec is None:
+        config.rl_module(rl_module_spec=RLModuleSpec(module_class=fast))
+    elif isinstance(spec, MultiRLModuleSpec):
+        for sub in spec.rl_module_specs.values():
+            if sub.module_class in _STOCK_MODULES and not sub.learner_only:
+                sub.module_class = fast
+    elif isinstance(spec, RLModuleSpec) and spec.module_class in _STOCK_MODULES:
+        spec.module_class = fast
+
+
+def fast_off_policy(config: Any, enabled: bool = True) -> Any:
+    """Return a copy of a SAC or CQL `config` on the fast path (module docstring).
+
+    Single-agent SAC with a uniform `EpisodeReplayBuffer` and n_step 1 gets all four parts;
+    other SAC settings (prioritized replay, n-step, multi-agent) keep RLlib's buffer and
+    connector path but still get the concat-MLP critics. CQL gets the critics (its batches
+    come from Ray Data). `enabled=False` only records the opt-out (for `with_asor`).
+    """
+    algo = config.algo_class.__name__ if config.algo_class is not None else ""
+    config = config.copy(copy_frozen=False)
+    lcd = dict(config.learner_config_dict or {})
+    if not enabled:
+        lcd[FAST_KEY] = False
+        config.learners(learner_config_dict=lcd)
+        return config
+    if algo not in ("SAC", "CQL"):
+        raise ValueError(f"fast_off_policy supports SAC and CQL, got {algo or type(config)}")
+    lcd[FAST_KEY] = True
+    config.learners(learner_config_dict=lcd)
+    _set_module_class(config, algo)
+    if algo == "SAC":
+        _fast_replay(config)
+    return config
+
+
+def _fast_replay(config: Any) -> None:
+    from rllib_asor.rllib.learners import FastSACTorchLearner
+
+    rb = dict(config.replay_buffer_config or {})
+    n_step = config.n_step
+    if config.is_multi_agent or rb.get("type") != "EpisodeReplayBuffer" or n_step != 1:
+        logger.info(
+            "fast_off_policy: keeping RLlib's replay path (type=%r, n_step=%r, multi-agent=%s)",
+            rb.get("type"),
+            n_step,
+            config.is_multi_agent,
+        )
+        return
+    rb["storage"] = FLAT_STORAGE
+    if config.seed is not None:
+        rb.setdefault("seed", config.seed)
+    config.training(replay_buffer_config=rb)
+    add_callbacks(config, FlatReplayCallback)
+    if config._learner_class is None:
+        config.learners(learner_class=FastSACTorchLearner)
+    if config.rollout_fragment_length == "auto":
+        # Keep the update-to-data ratio: RLlib's "auto" fragment is n_step (1) env steps per
+        # env (runner); without training_intensity that meant one update per such sample.
+        if not config.training_intensity:
+            envs = config.num_envs_per_env_runner * max(config.num_env_runners + 1, 1)
+            config.training(training_intensity=config.total_train_batch_size / envs)
+        config.env_runners(rollout_fragment_length=FRAGMENT)
