@@ -42,7 +42,6 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
                                       width, height)
         self.observation_space = observation_space()
         self.action_space = action_space()
-        self._done = False
 
     @property
     def map_id(self) -> int:
@@ -58,7 +57,6 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
         limit = self.spec.max_episode_steps if self.spec is not None and self.spec.max_episode_steps else None
         self.sim.max_episode_steps = limit or self._max_steps
         obs = self.sim.reset()
-        self._done = False
         return {k: v[0] for k, v in obs.items()}, self._course_info()
 
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
