@@ -31,6 +31,7 @@ import numpy as np
 
 from benchmarks.common import run_method_seed_grid, start_local_ray, write_json
 from benchmarks.lava_reproduction import parse_method
+from rllib_asor.evaluation.race import COLUMNS, evaluate, module_policy
 
 DEFAULT_METHODS = (
     "ppo",
@@ -39,20 +40,6 @@ DEFAULT_METHODS = (
     "asor:mode=asor",
 )
 """PPO, the published SRPO and ASOR (`preset=paper`), and ASOR's robust default."""
-COLUMNS = (
-    ("success", "success rate"),
-    ("trapped", "trapped rate"),
-    ("unnecessary_jump_rate", "unnecessary-jump rate"),
-    ("distance_from_cliff", "distance from cliff (m)"),
-    ("goal_reward", "goal reward"),
-    ("total_reward", "total reward"),
-)
-"""(key of `info["episode_metrics"]`, column title) of the paper's table."""
-EVAL_SEED0 = 10_000
-"""Course seeds of the evaluation episodes: EVAL_SEED0 + episode index (unseen in training
-with probability 1: training draws course seeds 0..999)."""
-
-
 def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace) -> Any:
     """The shared PPO config (identical for every method), plus ASOR when given."""
     import rllib_asor
@@ -81,63 +68,6 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
         settings = {"seed": seed, "obs_keys": list(RACE_ASOR_OBS_KEYS)} | asor
         config = rllib_asor.with_asor(config, **settings)
     return config
-
-
-def evaluate(policy: Any, episodes: int, max_steps: int) -> dict[str, Any]:
-    """Run `policy` on every map × `episodes` course seeds, all envs stepped together.
-
-    `policy(obs_batch: dict[str, np.ndarray], envs) -> actions [N, 8]`. Returns the per-map
-    mean of each column and the per-episode metrics.
-    """
-    import game_env
-    from game_env.env import ObstacleRaceEnv
-
-    pairs = [(m, EVAL_SEED0 + e) for m in range(game_env.NUM_MAPS) for e in range(episodes)]
-    # The limit goes to the constructor (a TimeLimit wrapper alone is not seen by the env).
-    envs = [ObstacleRaceEnv(map_id=m, course_seed=s, max_episode_steps=max_steps) for m, s in pairs]
-    obs = [env.reset(seed=s)[0] for env, (_, s) in zip(envs, pairs, strict=True)]
-    metrics: list[dict[str, float] | None] = [None] * len(envs)
-    while any(m is None for m in metrics):
-        live = [i for i, m in enumerate(metrics) if m is None]
-        batch = {k: np.stack([obs[i][k] for i in live]) for k in obs[live[0]]}
-        actions = policy(batch, [envs[i] for i in live])
-        for i, a in zip(live, actions, strict=True):
-            obs[i], _, term, trunc, info = envs[i].step(a)
-            if term or trunc:
-                metrics[i] = dict(info["episode_metrics"])
-    for env in envs:
-        env.close()
-    per_map: dict[int, dict[str, float]] = {}
-    for m in range(game_env.NUM_MAPS):
-        rows = [metrics[i] for i, (mm, _) in enumerate(pairs) if mm == m]
-        per_map[m] = {k: float(np.mean([r[k] for r in rows])) for k, _ in COLUMNS}
-    return {
-        "per_map": per_map,
-        "episodes": [[m, s, em] for (m, s), em in zip(pairs, metrics, strict=True)],
-    }
-
-
-def module_policy(module: Any, explore: bool) -> Any:
-    """Batched policy from the trained RLModule (stochastic unless `explore` is False)."""
-    import torch
-    from ray.rllib.core import Columns
-
-    dist_cls = (
-        module.get_exploration_action_dist_cls()
-        if explore
-        else module.get_inference_action_dist_cls()
-    )
-
-    def act(batch: dict[str, np.ndarray], envs: list[Any]) -> np.ndarray:
-        with torch.no_grad():
-            obs = {k: torch.as_tensor(v) for k, v in batch.items()}
-            logits = module.forward_inference({Columns.OBS: obs})[Columns.ACTION_DIST_INPUTS]
-            dist = dist_cls.from_logits(logits)
-            if not explore:
-                dist = dist.to_deterministic()
-            return dist.sample().numpy()
-
-    return act
 
 
 def random_policy(seed: int = 0) -> Any:

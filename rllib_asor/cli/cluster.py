@@ -54,12 +54,16 @@ def probe(address: str, timeout: float = PROBE_TIMEOUT_S) -> None:
         ) from None
 
 
-def start_ray(address: str | None, cpus_needed: float) -> None:
-    """Join `address`, or start a local Ray with enough logical CPUs for one trial."""
+def start_ray(address: str | None, cpus_needed: float) -> bool:
+    """Join `address`, or start a local Ray with enough logical CPUs for one trial; whether
+    this call connected (False: Ray was already initialised)."""
     import ray
 
+    from rllib_asor.cli import quiet
+
     if ray.is_initialized():
-        return
+        return False
+    quiet.quiet_driver()
     os.environ.setdefault("RAY_memory_monitor_refresh_ms", "0")
     os.environ.setdefault("RAY_DISABLE_DOCKER_CPU_WARNING", "1")
     if address:
@@ -71,6 +75,9 @@ def start_ray(address: str | None, cpus_needed: float) -> None:
             raise UsageError(
                 f"cannot join the Ray cluster at {address}: {msg}", key="--address"
             ) from None
-        return
-    num_cpus = max(os.cpu_count() or 1, math.ceil(cpus_needed))
-    ray.init(address="local", num_cpus=num_cpus, include_dashboard=False)
+    else:
+        num_cpus = max(os.cpu_count() or 1, math.ceil(cpus_needed))
+        ray.init(address="local", num_cpus=num_cpus, include_dashboard=False)
+    quiet.quiet_driver()  # again: ray.init may add handlers
+    quiet.quiet_worker_lines()
+    return True

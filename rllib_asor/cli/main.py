@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
+from rllib_asor.cli import quiet
 from rllib_asor.cli.errors import UsageError
 
 
@@ -30,13 +32,13 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The full `rllib` parser."""
-    from rllib_asor.cli import evaluate, train
+    from rllib_asor.cli import evaluate, quickstart, train
 
     parser = _Parser(
         prog="rllib", description="Train and evaluate RLlib (new API stack) agents, with ASOR."
     )
     parser.add_argument("--version", action="version", version=_version())
-    sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report}")
+    sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report,quickstart}")
     sub.required = True
     p_train = sub.add_parser(
         "train",
@@ -45,10 +47,19 @@ def build_parser() -> argparse.ArgumentParser:
         "[--config JSON] [options]",
     )
     train.add_arguments(p_train)
+    _add_verbose(p_train)
     p_train.set_defaults(func=train.run)
     p_eval = sub.add_parser("evaluate", help="run episodes with a trained checkpoint")
     evaluate.add_arguments(p_eval)
+    _add_verbose(p_eval)
     p_eval.set_defaults(func=evaluate.run)
+    p_quick = sub.add_parser(
+        "quickstart",
+        help="train a racer (~10 min), evaluate it on unseen courses, report + GIF (make train)",
+    )
+    quickstart.add_arguments(p_quick)
+    _add_verbose(p_quick)
+    p_quick.set_defaults(func=quickstart.run)
     p_report = sub.add_parser("report", help="tables and curves from a results directory")
     report = _report_module()
     if report is not None:
@@ -58,6 +69,15 @@ def build_parser() -> argparse.ArgumentParser:
         p_report.add_argument("rest", nargs=argparse.REMAINDER)
         p_report.set_defaults(func=_report_missing)
     return parser
+
+
+def _add_verbose(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--verbose",
+        action="store_true",
+        help=f"show every Ray/RLlib message (default: known-harmless ones are hidden; "
+        f"also {quiet.VERBOSE_ENV}=1)",
+    )
 
 
 def _version() -> str:
@@ -84,6 +104,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as e:  # --help (0) or a usage error (2): return it, do not raise
         return e.code if isinstance(e.code, int) else 2
+    if getattr(args, "verbose", False):
+        os.environ[quiet.VERBOSE_ENV] = "1"
     try:
         return int(args.func(args) or 0)
     except UsageError as e:

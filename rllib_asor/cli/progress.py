@@ -1,60 +1,127 @@
-"""Live progress table: iteration, env steps, episode return, asor/* (race/*) metrics when present."""
+"""Live progress of `rllib train`: one line per trial and report, at most 100 columns.
+
+    [0] it 12  steps 123.4k/400k  412/s  ETA 11m  return -12.3  success 0.31  bonus 0.040  disc 0.81
+
+`steps` is `num_env_steps_sampled_lifetime` (over the stop criterion when there is one), ETA
+extrapolates the trial's own rate to that criterion (or to `training_iteration`), `success` is
+the race's `race/success_rate`, `bonus` is ASOR's `asor/potential_share` (|λ·b| ÷ the env
+reward's scale) and `disc` its discriminator accuracy, each shown only when reported and
+while the line fits.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+import sys
+import time
+from collections.abc import Mapping
+from typing import Any, TextIO
 
-from ray.tune import CLIReporter
-from ray.tune.utils import flatten_dict
+from ray.tune.progress_reporter import ProgressReporter
 
-BASE_COLUMNS = {
-    "training_iteration": "iter",
-    "num_env_steps_sampled_lifetime": "env steps",
-    "env_runners/episode_return_mean": "return mean",
-    "time_total_s": "time (s)",
-}
-MAX_ASOR_COLUMNS = 8
-# Race metrics (result["race"], RaceMetricsCallback) shown when present.
-RACE_COLUMNS = ("success_rate", "trapped_rate", "curriculum_stage")
-# Shown first when present (DESIGN.md names); other asor/* metrics fill the remaining columns.
-PREFERRED_ASOR = ("disc_acc", "real_fraction", "aug_reward_mean", "disc_loss", "rnd_loss", "lambda")
+WIDTH = 100
+STEPS = "num_env_steps_sampled_lifetime"
+ITERATION = "training_iteration"
+# (short label, result path, format) of the optional fields, in order.
+OPTIONAL = (
+    ("return", ("env_runners", "episode_return_mean"), "{:.4g}"),
+    ("success", ("race", "success_rate"), "{:.2f}"),
+    ("bonus", ("asor", "potential_share"), "{:.3f}"),
+    ("disc", ("asor", "disc_acc"), "{:.2f}"),
+    ("stage", ("race", "curriculum_stage"), "{:.0f}"),
+)
 
 
-class ProgressReporter(CLIReporter):
-    """CLIReporter that adds columns for the `asor/...` (and `race/...`) metrics it sees."""
+class LineReporter(ProgressReporter):
+    """Tune progress reporter printing one compact line per trial (see the module docstring)."""
 
-    def __init__(self, **kwargs: Any) -> None:
-        # print_intermediate_tables defaults to "Tune's global verbosity >= 3 at construction",
-        # which a previous run in the same process lowers: ask for the table explicitly.
-        super().__init__(
-            metric_columns=dict(BASE_COLUMNS),
-            max_report_frequency=10,
-            print_intermediate_tables=True,
-            **kwargs,
-        )
-        self._asor_seen: set[str] = set()
+    def __init__(
+        self,
+        stop: Mapping[str, Any] | None = None,
+        every_s: float = 10.0,
+        out: TextIO | None = None,
+    ) -> None:
+        self.stop = dict(stop or {})
+        self.every_s = every_s
+        self.out = out
+        self._last_print = float("-inf")
+        self._printed: dict[str, tuple[str, int]] = {}  # trial id -> (status, iteration)
+
+    def should_report(self, trials: list[Any], done: bool = False) -> bool:
+        changed = any(self._new(t) for t in trials)
+        return changed and (done or time.monotonic() - self._last_print >= self.every_s)
 
     def report(self, trials: list[Any], done: bool, *sys_info: str) -> None:
-        found: set[str] = set()
-        for trial in trials:
-            result = {k: v for k, v in (trial.last_result or {}).items() if k != "config"}
-            found.update(
-                k
-                for k in flatten_dict(result, delimiter="/")
-                if k.startswith("asor/") or "/asor/" in k
-            )
-            race = result.get("race") or {}
-            found.update(f"race/{k}" for k in RACE_COLUMNS if k in race)
-        for key in sorted(found - self._asor_seen, key=_rank):
-            if len(self._asor_seen) >= MAX_ASOR_COLUMNS:
-                break
-            self._asor_seen.add(key)
-            self.add_metric_column(key, key[key.index("asor/") :] if "asor/" in key else key)
-        super().report(trials, done, *sys_info)
+        out = self.out or sys.stdout
+        for index, trial in enumerate(trials):
+            if not self._new(trial):
+                continue
+            self._printed[trial.trial_id] = self._key(trial)
+            print(self.line(index, trial.status, trial.last_result or {}), file=out, flush=True)
+        self._last_print = time.monotonic()
+
+    def line(self, index: int, status: str, result: Mapping[str, Any]) -> str:
+        """The progress line of one trial's latest result."""
+        it = result.get(ITERATION)
+        if it is None:
+            return f"[{index}] {status.lower()}"
+        parts = [f"[{index}] it {it}"]
+        steps, elapsed = result.get(STEPS), result.get("time_total_s")
+        if steps is not None:
+            goal = self.stop.get(STEPS)
+            parts.append(f"steps {_si(steps)}" + (f"/{_si(goal)}" if goal else ""))
+            if elapsed:
+                parts.append(f"{steps / elapsed:.0f}/s")
+        eta = self._eta(result)
+        if eta is not None and status == "RUNNING":
+            parts.append(f"ETA {_duration(eta)}")
+        tail = [] if status in ("RUNNING", "PENDING") else [status.lower()]
+        for label, path, fmt in OPTIONAL:  # in order, as many as fit
+            value = _get(result, path)
+            part = f"{label} {fmt.format(value)}" if isinstance(value, int | float) else None
+            if part and len("  ".join([*parts, part, *tail])) <= WIDTH:
+                parts.append(part)
+        return "  ".join([*parts, *tail])[:WIDTH]
+
+    def _eta(self, result: Mapping[str, Any]) -> float | None:
+        elapsed = result.get("time_total_s")
+        for key in (STEPS, ITERATION):
+            goal, done = self.stop.get(key), result.get(key)
+            if goal and done and elapsed:
+                return max(0.0, elapsed * (float(goal) - done) / done)
+        return None
+
+    def _new(self, trial: Any) -> bool:
+        """Whether `trial` has something to show: a new result or a new state (not PENDING)."""
+        return trial.status != "PENDING" and self._key(trial) != self._printed.get(trial.trial_id)
+
+    @staticmethod
+    def _key(trial: Any) -> tuple[str, int]:
+        return trial.status, (trial.last_result or {}).get(ITERATION, 0)
 
 
-def _rank(key: str) -> tuple[int, str]:
-    if key.startswith("race/"):
-        return (-1, key)
-    name = key.rsplit("asor/", 1)[-1]
-    return (PREFERRED_ASOR.index(name) if name in PREFERRED_ASOR else len(PREFERRED_ASOR), key)
+def _get(result: Mapping[str, Any], path: tuple[str, ...]) -> Any:
+    value: Any = result
+    for part in path:
+        if not isinstance(value, Mapping):
+            return None
+        value = value.get(part)
+    return value
+
+
+def _si(n: float) -> str:
+    n = float(n)
+    for unit, size in (("M", 1e6), ("k", 1e3)):
+        if abs(n) >= size:
+            return f"{n / size:.4g}{unit}"
+    return f"{n:.0f}"
+
+
+def _duration(seconds: float) -> str:
+    seconds = int(seconds)
+    if seconds >= 3600:
+        return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m"
+    if seconds >= 600:
+        return f"{seconds // 60}m"
+    if seconds >= 60:
+        return f"{seconds // 60}m{seconds % 60:02d}s"
+    return f"{seconds}s"

@@ -96,6 +96,13 @@ def _trainable(exp: E.Experiment) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     """Validate all experiments first (exit 2 on bad input), then train each (exit 1 on failure)."""
+    failed = sum(print_summary(exp, results) for exp, results in train(args))
+    return 1 if failed else 0
+
+
+def train(args: argparse.Namespace) -> list[tuple[E.Experiment, Any]]:
+    """Validate every experiment (UsageError on bad input), run each with Tune and stop the
+    Ray this call started (so no worker output follows); each experiment's ResultGrid."""
     stop = E.parse_stop_flags(args.stop)
     exps = load_experiments(args)
     configs = []
@@ -120,11 +127,14 @@ def run(args: argparse.Namespace) -> int:
             print(f"rllib: warning: {warning}", file=sys.stderr)
     # Tune's CLIReporter (our live table) is used only with the old output engine.
     os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
-    start_ray(args.address, max(E.required_cpus(c) for c in configs))
-    failed = 0
-    for exp, cfg in zip(exps, configs, strict=True):
-        failed += _run_one(exp, cfg, args)
-    return 1 if failed else 0
+    started = start_ray(args.address, max(E.required_cpus(c) for c in configs))
+    try:
+        return [(exp, _fit(exp, cfg, args)) for exp, cfg in zip(exps, configs, strict=True)]
+    finally:
+        if started:
+            import ray
+
+            ray.shutdown()
 
 
 def _max_concurrent(algo_config: Any) -> int | None:
@@ -148,11 +158,11 @@ def _check_resumable(path: str) -> None:
         )
 
 
-def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> int:
-    """Run one experiment with Tune; return the number of errored or unfinished trials."""
+def _fit(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
+    """Run one experiment with Tune; its ResultGrid."""
     from ray import tune
 
-    from rllib_asor.cli.progress import ProgressReporter
+    from rllib_asor.cli.progress import LineReporter
     from rllib_asor.rllib import envs
 
     envs.register_with_tune(exp.env)
@@ -178,7 +188,7 @@ def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> i
             storage_path=root,
             stop=exp.stop or None,
             checkpoint_config=tune.CheckpointConfig(**E.checkpoint_kwargs(exp)),
-            progress_reporter=ProgressReporter(),
+            progress_reporter=LineReporter(exp.stop),
             verbose=1,
         )
         tuner = tune.Tuner(
@@ -189,19 +199,11 @@ def _run_one(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> i
                 num_samples=exp.num_samples, max_concurrent_trials=_max_concurrent(algo_config)
             ),
         )
-    results = tuner.fit()
-    _print_summary(exp, results)
-    unfinished = [r for r in results if not r.error and not (r.metrics or {}).get("done")]
-    if unfinished:
-        print(
-            f"rllib: {exp.name}: {len(unfinished)} trial(s) stopped before their stop criteria "
-            "(interrupted?); continue with --resume",
-            file=sys.stderr,
-        )
-    return len(results.errors) + len(unfinished)
+    return tuner.fit()
 
 
-def _print_summary(exp: E.Experiment, results: Any) -> None:
+def print_summary(exp: E.Experiment, results: Any) -> int:
+    """One line per trial; the number of errored or unfinished trials."""
     print(f"rllib: {exp.name}: {len(results)} trial(s), {len(results.errors)} errored")
     for result in results:
         m = result.metrics or {}
@@ -217,3 +219,11 @@ def _print_summary(exp: E.Experiment, results: Any) -> None:
         if result.error:
             first = str(result.error).strip().splitlines()
             print(f"    error: {first[-1] if first else type(result.error).__name__}")
+    unfinished = [r for r in results if not r.error and not (r.metrics or {}).get("done")]
+    if unfinished:
+        print(
+            f"rllib: {exp.name}: {len(unfinished)} trial(s) stopped before their stop criteria "
+            "(interrupted?); continue with --resume",
+            file=sys.stderr,
+        )
+    return len(results.errors) + len(unfinished)

@@ -1,0 +1,1 @@
+"""Evaluating trained policies (the race on unseen courses, GIFs)."""

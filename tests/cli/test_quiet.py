@@ -1,0 +1,54 @@
+"""Known-harmless Ray/RLlib lines are dropped, everything else is kept, `--verbose` keeps all."""
+
+from __future__ import annotations
+
+import logging
+
+from rllib_asor.cli import quiet
+
+CORE_WORKER = (
+    "[2026-11-23 20:10:05,221 E 2309 2309] core_worker.cc:2465: Actor with class name: "
+    "'SingleAgentEnvRunner' and ID: 'fb99' has constructor arguments in the object store and "
+    "max_restarts > 0. If the arguments in the object store go out of scope or are lost, ..."
+)
+
+
+def test_worker_lines_drop_only_known_harmless_ones():
+    seen = []
+    emit = quiet._filtered(seen.append)
+    emit(
+        {
+            "lines": [
+                CORE_WORKER,
+                "ValueError: my env broke",
+                "Install gputil for GPU system monitoring.",
+            ]
+        }
+    )
+    emit(
+        {"lines": ["Checkpoint successfully created at: Checkpoint(...)"]}
+    )  # nothing left: no call
+    assert [d["lines"] for d in seen] == [["ValueError: my env broke"]]
+    assert quiet._filtered(emit) is emit  # wrapping twice is a no-op
+
+
+def test_driver_logger_filter_and_verbose_switch(monkeypatch, caplog):
+    monkeypatch.delenv(quiet.VERBOSE_ENV, raising=False)
+    quiet.quiet_driver()
+    logger = logging.getLogger("ray")
+    assert any(isinstance(f, quiet._DropHarmless) for f in logger.filters)
+    record = logging.LogRecord(
+        "ray", logging.WARNING, __file__, 1, "Token authentication is enabled", None, None
+    )
+    assert not quiet._DropHarmless().filter(record)
+    record.msg = "a real problem"
+    assert quiet._DropHarmless().filter(record)
+    monkeypatch.setenv(quiet.VERBOSE_ENV, "1")
+    assert quiet.verbose()
+    seen = []
+    handlers = [("ray_print_logs", seen.append)]
+    from ray._private.ray_logging import global_worker_stdstream_dispatcher as dispatcher
+
+    monkeypatch.setattr(dispatcher, "handlers", handlers)
+    quiet.quiet_worker_lines()  # verbose: left as it is
+    assert dispatcher.handlers[0][1] == seen.append
