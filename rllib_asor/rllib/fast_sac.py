@@ -17,11 +17,16 @@ docs/results.md, "Fast experiments: SAC speed"), a stock RLlib 2.60 SAC gradient
 3. **The learner connector** walks those 256 episodes to build the batch; our Learners
    (`FastSACLearnerMixin`) build the batch from the buffer's columns directly (ASOR's piece
    then runs on that batch).
-4. **Sampling one env step per training step** (RLlib's `rollout_fragment_length="auto"` is
-   n_step = 1 for SAC): each training step paid for a sampling call, metrics and a weight sync.
-   The fast path samples `FRAGMENT` steps per training step and keeps the update-to-data ratio
-   (training_intensity rescaled), so the acting policy is at most `FRAGMENT` updates old
-   (SB3's `train_freq`).
+4. **One env step and one Learner call per gradient step** (RLlib's
+   `rollout_fragment_length="auto"` is n_step = 1 for SAC): every gradient step paid for a
+   sampling call, a weight sync and a Learner call with its metrics reduction (~5 ms with
+   ASOR's modules). The fast path samples `FRAGMENT` steps per training step and gives each
+   Learner call `STEPS_PER_CALL` x batch rows, on which it runs `STEPS_PER_CALL` gradient
+   steps of the user's batch size, each followed by its Polyak target update. The
+   update-to-data ratio (rows replayed per env step, `training_intensity`) is unchanged; the
+   acting policy is at most `FRAGMENT` updates old (SB3's `train_freq`), and ASOR's
+   discriminator/proxy work (V(s), partition, bonus) runs once per Learner call on all its
+   rows, with the critics of the call's start.
 
 `fast_off_policy(config)` switches all of it on for a SAC or CQL config; `with_asor` calls it
 for SAC and CQL unless `learner_config_dict["fast_off_policy"]` is False. The tuned examples
@@ -48,12 +53,16 @@ from ray.rllib.core.models.torch.encoder import TorchMLPEncoder
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-from rllib_asor.rllib.callbacks import add_callbacks
+from rllib_asor.rllib.replay import MINIBATCH_KEY
 
 logger = logging.getLogger(__name__)
 
 FRAGMENT = 16
 """Env steps per env runner and training step on the fast path (RLlib's SAC default: 1)."""
+STEPS_PER_CALL = 16
+"""Gradient steps per Learner call on the fast path: the Learner gets STEPS_PER_CALL x batch
+replayed rows, runs ASOR's piece once on them and steps on minibatches of the user's batch
+size (`learner_config_dict[MINIBATCH_KEY]`, replay.py), with a Polyak target update after each."""
 FAST_KEY = "fast_off_policy"
 """`learner_config_dict` key: True once `fast_off_policy` ran, False opts `with_asor` out."""
 FLAT_STORAGE = "flat"
@@ -173,6 +182,8 @@ def fast_off_policy(config: Any, enabled: bool = True) -> Any:
     algo = config.algo_class.__name__ if config.algo_class is not None else ""
     config = config.copy(copy_frozen=False)
     lcd = dict(config.learner_config_dict or {})
+    if enabled and lcd.get(FAST_KEY) is True:
+        return config  # already on the fast path (e.g. a restored trial re-applying with_asor)
     if not enabled:
         lcd[FAST_KEY] = False
         config.learners(learner_config_dict=lcd)
@@ -204,13 +215,23 @@ def _fast_replay(config: Any) -> None:
     if config.seed is not None:
         rb.setdefault("seed", config.seed)
     config.training(replay_buffer_config=rb)
+    from rllib_asor.rllib.callbacks import add_callbacks
+
     add_callbacks(config, FlatReplayCallback)
     if config._learner_class is None:
         config.learners(learner_class=FastSACTorchLearner)
-    if config.rollout_fragment_length == "auto":
-        # Keep the update-to-data ratio: RLlib's "auto" fragment is n_step (1) env steps per
-        # env (runner); without training_intensity that meant one update per such sample.
-        if not config.training_intensity:
-            envs = config.num_envs_per_env_runner * max(config.num_env_runners + 1, 1)
-            config.training(training_intensity=config.total_train_batch_size / envs)
-        config.env_runners(rollout_fragment_length=FRAGMENT)
+    if config.rollout_fragment_length != "auto":
+        return  # the user's own sampling/update rhythm: one gradient step per Learner call
+    # Keep the update-to-data ratio while sampling FRAGMENT steps per env (runner) and doing
+    # STEPS_PER_CALL gradient steps of the user's batch per Learner call. RLlib's ratio is
+    # training_intensity = rows replayed per sampled env step; without one, RLlib's "auto"
+    # (fragment n_step = 1) meant one update of the total batch per such sample.
+    batch = config.train_batch_size_per_learner
+    if not config.training_intensity:
+        envs = config.num_envs_per_env_runner * max(config.num_env_runners + 1, 1)
+        config.training(training_intensity=config.total_train_batch_size / envs)
+    lcd = dict(config.learner_config_dict or {})
+    lcd[MINIBATCH_KEY] = batch
+    config.learners(learner_config_dict=lcd)
+    config.training(train_batch_size_per_learner=batch * STEPS_PER_CALL)
+    config.env_runners(rollout_fragment_length=FRAGMENT)

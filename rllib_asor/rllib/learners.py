@@ -26,6 +26,7 @@ from ray.rllib.connectors.learner.add_next_observations_from_episodes_to_train_b
 )
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.models.base import ENCODER_OUT
+from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
@@ -36,7 +37,7 @@ from rllib_asor.rllib.connector import (
     AuxModuleIds,
     critic_values,
 )
-from rllib_asor.rllib.replay import FlatTransitions
+from rllib_asor.rllib.replay import MINIBATCH_KEY, FlatTransitions
 
 DISC_PREFIX = "asor_disc."
 PROXY_PREFIX = "asor_proxy."
@@ -220,6 +221,50 @@ class FastSACLearnerMixin:
 
     def _flat_batch_hook(self, batch: dict[str, Any]) -> dict[str, Any]:
         return batch
+
+    def _create_iterator_if_necessary(self, *, training_data: Any, **kwargs: Any) -> Any:
+        """Flat batches of several gradient steps: minibatches of the user's batch size."""
+        episodes = training_data.episodes
+        minibatch = (self.config.learner_config_dict or {}).get(MINIBATCH_KEY)  # type: ignore[attr-defined]
+        self._fast_steps = bool(
+            minibatch and episodes and all(isinstance(e, FlatTransitions) for e in episodes)
+        )
+        if self._fast_steps and not kwargs.get("minibatch_size"):
+            kwargs["minibatch_size"] = int(minibatch)
+            kwargs["num_epochs"] = 1
+        return super()._create_iterator_if_necessary(training_data=training_data, **kwargs)  # type: ignore[misc]
+
+    def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
+        out = super()._update(batch, **kwargs)  # type: ignore[misc]
+        if getattr(self, "_fast_steps", False):
+            self._polyak_targets()  # SAC's target update after every gradient step
+        return out
+
+    def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
+        if getattr(self, "_fast_steps", False):
+            # Targets were updated after each minibatch; keep DQNLearner from doing it again.
+            for mid in self.module.keys():  # type: ignore[attr-defined]
+                self.last_update_ts_by_mid[mid] = float("inf")  # type: ignore[attr-defined]
+            try:
+                super().after_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
+            finally:
+                for mid in list(self.last_update_ts_by_mid):  # type: ignore[attr-defined]
+                    self.last_update_ts_by_mid[mid] = 0  # type: ignore[attr-defined]
+            return
+        super().after_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
+
+    @torch.no_grad()
+    def _polyak_targets(self) -> None:
+        for mid, module in self.module._rl_modules.items():  # type: ignore[attr-defined]
+            inner = module.unwrapped()
+            if not isinstance(inner, TargetNetworkAPI):
+                continue
+            tau = self.config.get_config_for_module(mid).tau  # type: ignore[attr-defined]
+            main, target = [], []
+            for main_net, target_net in inner.get_target_network_pairs():
+                main.extend(main_net.parameters())
+                target.extend(target_net.parameters())
+            torch._foreach_lerp_(target, main, tau)
 
 
 class FastSACTorchLearner(FastSACLearnerMixin, SACTorchLearner):

@@ -15,8 +15,9 @@ type names and RLlib's learner cannot read `FlatTransitions`, so use it through
 `fast_off_policy(config)` (rllib_asor/rllib/fast_sac.py), which installs it at algorithm init
 and sets a Learner that reads it.
 
-Checkpoints: `get_state()` holds the filled rows (Algorithm checkpoints include it only with
-`store_buffer_in_checkpoints=True`, as for RLlib's buffers).
+Checkpoints: RLlib 2.60's new-stack `Algorithm.save_to_path` stores no replay buffer (its own
+neither), so a restored run refills the buffer from its next samples. `get_state()` /
+`set_state()` hold the filled rows, write position and sampling RNG for whoever saves a buffer.
 """
 
 from __future__ import annotations
@@ -26,6 +27,10 @@ from typing import Any
 import numpy as np
 from ray.rllib.core.columns import Columns
 from ray.rllib.utils.replay_buffers.episode_replay_buffer import EpisodeReplayBuffer
+
+MINIBATCH_KEY = "fast_off_policy_minibatch"
+"""`learner_config_dict` key: rows per gradient step when a Learner call carries several
+(set by `fast_off_policy`, read by `FastSACLearnerMixin`)."""
 
 FIELDS = (
     Columns.OBS,
@@ -134,6 +139,7 @@ class FlatReplayBuffer(EpisodeReplayBuffer):
 
     def _write(self, new: dict[str, np.ndarray]) -> None:
         n = len(new[Columns.REWARDS])
+        self._added += n
         if n >= self.capacity:  # keep the newest `capacity` rows
             new = {k: v[-self.capacity :] for k, v in new.items()}
             n = self.capacity
@@ -142,7 +148,6 @@ class FlatReplayBuffer(EpisodeReplayBuffer):
             self._cols[k][idx] = v
         self._pos = int((self._pos + n) % self.capacity)
         self._size = min(self._size + n, self.capacity)
-        self._added += n
 
     def sample(
         self,
