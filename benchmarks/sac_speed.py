@@ -24,6 +24,11 @@ pinned; it is never needed by `make test`). Run:
     nice -n 5 .venv/bin/python -m benchmarks.sac_speed --rounds 3 --block 512 \
         --out benchmarks/out/sac_speed
 
+`--cql-updates N --runners none` times CQL Learner steps instead (stock vs fast critics, with
+and without ASOR; random Hopper-shaped batches, no dataset needed):
+
+    nice -n 5 .venv/bin/python -m benchmarks.sac_speed --cql-updates 100 --runners none
+
 It writes OUT/sac_speed.json (env steps/s per runner and round, ratios to SB3 and to RLlib
 stock) and prints a markdown table. `--profile RUNNER` instead trains RUNNER alone for
 `--block` steps after its warm-up under cProfile and prints where the time went.
@@ -37,6 +42,8 @@ import platform
 import time
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 ENV_ID = "rllib_asor/HopperShift-v0"
 ENV_PARAMS = ["mass", "damping", "wind"]
@@ -249,11 +256,77 @@ def profile(name: str, args: argparse.Namespace) -> None:
         stats.dump_stats(str(Path(args.out) / f"profile-{name}.pstats"))
 
 
+def cql_update_speed(args: argparse.Namespace) -> dict[str, Any]:
+    """CQL Learner gradient steps/s on random Hopper-shaped batches (no dataset needed): RLlib's
+    module vs the fast path's concat-MLP critics, with and without ASOR, interleaved rounds.
+    Offline batches come through Ray Data, so the critics are the part of the fast path CQL
+    gets; this measures the Learner step alone."""
+    import gymnasium as gym
+    import torch
+    from ray.rllib.algorithms.cql import CQLConfig
+    from ray.rllib.core.columns import Columns
+
+    import rllib_asor
+    import rllib_asor.envs  # noqa: F401
+    from rllib_asor.rllib.fast_sac import fast_off_policy
+
+    env = gym.make(ENV_ID)
+    base = (
+        CQLConfig()
+        .environment(ENV_ID)
+        .env_runners(num_env_runners=0)
+        .learners(num_learners=0)
+        .training(
+            train_batch_size_per_learner=256,
+            lr=None,
+            actor_lr=1e-4,
+            critic_lr=3e-4,
+            alpha_lr=1e-4,
+            bc_iters=0,
+            min_q_weight=5.0,
+        )
+        .rl_module(model_config={"fcnet_hiddens": [256, 256], "fcnet_activation": "relu"})
+        .debugging(seed=args.seed)
+    )
+    variants = {
+        "cql_stock": base,
+        "cql": fast_off_policy(base),
+        "cql_asor_stock": rllib_asor.with_asor(fast_off_policy(base, enabled=False), seed=0),
+        "cql_asor": rllib_asor.with_asor(base, seed=0),
+    }
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(256, *env.observation_space.shape)).astype(np.float32)
+    batch = {
+        Columns.OBS: obs,
+        Columns.NEXT_OBS: obs + 0.01,
+        Columns.ACTIONS: rng.uniform(-1, 1, (256, *env.action_space.shape)).astype(np.float32),
+        Columns.REWARDS: rng.normal(size=256).astype(np.float32),
+        Columns.TERMINATEDS: np.zeros(256, dtype=bool),
+        Columns.TRUNCATEDS: np.zeros(256, dtype=bool),
+    }
+    learners = {n: c.build_learner(env=env) for n, c in variants.items()}
+    times: dict[str, list[float]] = {n: [] for n in learners}
+    for _ in range(args.rounds):
+        for name, learner in learners.items():
+            t0 = time.perf_counter()
+            for _ in range(args.cql_updates):
+                tb = {"default_policy": {k: torch.from_numpy(v.copy()) for k, v in batch.items()}}
+                learner._update(tb)
+            times[name].append(args.cql_updates / (time.perf_counter() - t0))
+    rates = {n: float(np.mean(v)) for n, v in times.items()}
+    out = {"updates_per_s": rates, "per_round": times, "updates_per_round": args.cql_updates}
+    print("| CQL Learner (batch 256, 256x256) | gradient steps/s | per round |")
+    print("|---|---|---|")
+    for n, r in rates.items():
+        print(f"| {n} | {r:.1f} | {', '.join(f'{x:.1f}' for x in times[n])} |")
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    p.add_argument("--runners", nargs="+", choices=RUNNERS, default=list(RUNNERS))
+    p.add_argument("--runners", nargs="+", choices=[*RUNNERS, "none"], default=list(RUNNERS))
     p.add_argument("--warmup", type=int, default=1000, help="env steps before learning")
     p.add_argument("--block", type=int, default=512, help="env steps per runner and round")
     p.add_argument("--rounds", type=int, default=3)
@@ -261,6 +334,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", default="benchmarks/out/sac_speed")
     p.add_argument("--profile", choices=RUNNERS, default=None)
     p.add_argument("--profile-lines", type=int, default=45)
+    p.add_argument(
+        "--cql-updates",
+        type=int,
+        default=0,
+        help="also time N CQL Learner steps per variant and round (writes cql_speed.json)",
+    )
     args = p.parse_args(argv)
 
     from benchmarks.common import start_local_ray, write_json
@@ -274,6 +353,10 @@ def main(argv: list[str] | None = None) -> None:
     if args.profile:
         profile(args.profile, args)
         return
+    if args.cql_updates:
+        write_json(Path(args.out) / "cql_speed.json", cql_update_speed(args))
+        if args.runners == ["none"]:
+            return
     res = measure(args)
     md = table(res)
     res["table_md"] = md

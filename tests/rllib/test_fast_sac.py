@@ -3,6 +3,8 @@ gradient steps per Learner call at the same update-to-data ratio, and with_asor 
 
 The learning check (stock vs fast path on Pendulum, several seeds) is marked `slow`."""
 
+import functools
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -211,19 +213,34 @@ def test_fast_sac_asor_runs_asor_once_per_learner_call(ray_session):
             return original(batch)
 
         learner._flat_batch_hook = hook
+        steps = []  # policy rows of every gradient step
+        update = learner._update
+        learner._update = lambda batch, **kw: (
+            steps.append(len(batch["default_policy"][Columns.REWARDS])) or update(batch, **kw)
+        )
         for _ in range(3):
             result = algo.train()
         assert piece_calls and set(piece_calls) == {32 * STEPS_PER_CALL}
+        # the aux modules' batches do not add gradient steps: STEPS_PER_CALL per call
+        assert len(steps) == STEPS_PER_CALL * len(piece_calls) and set(steps) == {32}
         assert np.isfinite(result["asor"]["disc_loss"])
         assert {"asor_disc.default_policy"} <= set(result["learners"])
     finally:
         algo.stop()
 
 
-def _pendulum_return(fast: bool, seed: int, steps: int) -> float:
-    """Train SAC on Pendulum for `steps` env steps (stock or fast path, else identical:
-    64x64 networks, batch 128, one update per env step after 500 warm-up steps); return the
-    deterministic policy's mean return over 5 fixed-seed episodes."""
+@functools.cache  # the stock runs serve both slow tests
+def _pendulum_return(variant: str, seed: int, steps: int) -> float:
+    """Train SAC on Pendulum for `steps` env steps and return the deterministic policy's mean
+    return over 5 fixed-seed episodes. Identical settings (64x64 networks, batch 128, lr 1e-3,
+    one update per env step after 500 warm-up steps) on three paths: `stock` (RLlib as is),
+    `fast` (`fast_off_policy`) and `fast_data` (the fast path's replay, batch building and 16
+    steps per Learner call, but RLlib's own multi-stream critics)."""
+    from ray.rllib.algorithms.sac.torch.default_sac_torch_rl_module import (
+        DefaultSACTorchRLModule,
+    )
+    from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+
     config = (
         SACConfig()
         .environment("Pendulum-v1")
@@ -242,8 +259,10 @@ def _pendulum_return(fast: bool, seed: int, steps: int) -> float:
         .reporting(min_sample_timesteps_per_iteration=500)
         .debugging(seed=seed)
     )
-    if fast:
+    if variant != "stock":
         config = fast_off_policy(config)
+    if variant == "fast_data":
+        config.rl_module(rl_module_spec=RLModuleSpec(module_class=DefaultSACTorchRLModule))
     algo = config.build_algo()
     try:
         done = 0
@@ -269,14 +288,30 @@ def _pendulum_return(fast: bool, seed: int, steps: int) -> float:
         algo.stop()
 
 
+SEEDS, STEPS = (0, 1, 2), 5000
+
+
 @pytest.mark.slow
-def test_fast_path_learns_pendulum_like_the_stock_path(ray_session):
-    """3 seeds each, 3,000 env steps: both paths learn (random policy ≈ -1200) and their means
-    differ by less than the seed spread allows (2 pooled standard deviations + 100)."""
-    seeds, steps = (0, 1, 2), 3000
-    stock = [_pendulum_return(False, s, steps) for s in seeds]
-    fast = [_pendulum_return(True, s, steps) for s in seeds]
-    print(f"pendulum returns after {steps} steps: stock {stock} fast {fast}")
+def test_fast_data_path_learns_pendulum_like_the_stock_path(ray_session):
+    """Replay, batch building and 16 steps per Learner call change nothing about learning: with
+    RLlib's own critics on both sides, 3 seeds x 5,000 env steps, both learn (random policy
+    ≈ -1200) and their means differ by less than 2 pooled seed standard deviations + 100."""
+    stock = [_pendulum_return("stock", s, STEPS) for s in SEEDS]
+    fast = [_pendulum_return("fast_data", s, STEPS) for s in SEEDS]
+    print(f"pendulum returns after {STEPS} steps: stock {stock} fast_data {fast}")
     assert np.mean(stock) > -500 and np.mean(fast) > -500
     spread = np.sqrt((np.var(stock, ddof=1) + np.var(fast, ddof=1)) / 2)
     assert abs(np.mean(fast) - np.mean(stock)) < 2 * spread + 100
+
+
+@pytest.mark.slow
+def test_fast_path_with_concat_critics_learns_pendulum_at_least_as_well(ray_session):
+    """The whole fast path (concat-MLP critics too): learns, and its mean return is not below
+    the stock path's by more than 2 pooled seed standard deviations + 100 (3 seeds; measured
+    at 3,000 steps it was well above: docs/results.md, issue 11)."""
+    stock = [_pendulum_return("stock", s, STEPS) for s in SEEDS]
+    fast = [_pendulum_return("fast", s, STEPS) for s in SEEDS]
+    print(f"pendulum returns after {STEPS} steps: stock {stock} fast {fast}")
+    assert np.mean(fast) > -500
+    spread = np.sqrt((np.var(stock, ddof=1) + np.var(fast, ddof=1)) / 2)
+    assert np.mean(fast) > np.mean(stock) - (2 * spread + 100)
