@@ -20,7 +20,8 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip setuptools wheel $(PIP_FILTER)
 	# torch pinned to the CPU build (a local wheel here); never an open `torch` requirement.
 	$(PY) -m pip install -q "torch==2.13.0" $(PIP_FILTER)
-	$(PY) -m pip install -q -e ".[test]" $(PIP_FILTER)
+	# compat: a plain .pth to the source tree (the default finder prints a notice per install)
+	$(PY) -m pip install -q -e ".[test]" --config-settings editable_mode=compat $(PIP_FILTER)
 	touch $(STAMP)
 
 install: $(STAMP)

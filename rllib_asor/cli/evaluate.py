@@ -16,6 +16,7 @@ import pickle
 import sys
 from typing import Any
 
+from rllib_asor.cli import quiet
 from rllib_asor.cli.errors import UsageError
 
 CHECKPOINT_MARKER = "rllib_checkpoint.json"
@@ -105,6 +106,7 @@ def evaluate(
     from rllib_asor.cli.cluster import start_ray
     from rllib_asor.rllib import envs
 
+    quiet.import_quietly("ray.rllib.algorithms.dreamerv3.utils.debugging")  # see its docstring
     config = _local_config(path, seed)
     env_id = config.get("env")
     if isinstance(env_id, str):

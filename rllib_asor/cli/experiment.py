@@ -122,12 +122,14 @@ def _absolute_input(value: Any) -> Any:
     return value
 
 
-def _check_input_exists(value: Any, source: str, name: str) -> None:
-    """A local offline `input` that does not exist fails here, before Ray starts."""
+def _missing_inputs(value: Any) -> list[str]:
     paths = value if isinstance(value, list) else [value]
-    missing = [
-        p for p in paths if isinstance(p, str) and os.path.isabs(p) and not os.path.exists(p)
-    ]
+    return [p for p in paths if isinstance(p, str) and os.path.isabs(p) and not os.path.exists(p)]
+
+
+def check_offline_input(exp: Experiment) -> None:
+    """A local offline `input` that does not exist fails here, before Ray starts."""
+    missing = _missing_inputs(exp.config.get("input"))
     if missing:
         hint = (
             "; make the offline datasets first: `make datasets` (about 10 minutes on 2 cores, "
@@ -137,9 +139,39 @@ def _check_input_exists(value: Any, source: str, name: str) -> None:
         )
         raise UsageError(
             f"offline input {missing[0]} does not exist{hint}",
-            source=source,
-            key=f"{name}.config.input",
+            source=exp.source,
+            key=f"{exp.name}.config.input",
         )
+
+
+def _tiny_test_data(exp: Experiment) -> None:
+    """--test on a fresh clone: stand-ins for the missing datasets, in a temporary folder."""
+    missing = _missing_inputs(exp.config.get("input"))
+    if not missing:
+        return
+    import atexit
+    import shutil
+    import tempfile
+
+    from rllib_asor.rllib.offline import TINY_STEPS, tiny_datasets
+
+    tmp = tempfile.mkdtemp(prefix="rllib-asor-test-data-")
+    atexit.register(shutil.rmtree, tmp, ignore_errors=True)
+    print(
+        f"rllib: --test: {len(missing)} offline dataset(s) missing (e.g. {missing[0]}); building "
+        f"tiny stand-ins ({TINY_STEPS} steps each, untrained policy; not for results) ...",
+        flush=True,
+    )
+    with _quiet():
+        swap = tiny_datasets(exp.env, missing, tmp)
+    value = exp.config["input"]
+    exp.config["input"] = (
+        [swap.get(p, p) for p in value] if isinstance(value, list) else swap.get(value, value)
+    )
+    exp.warnings.append(
+        f"--test: trained on tiny stand-in datasets in {tmp} (deleted at exit); "
+        "for real runs make the data first: `make datasets`"
+    )
 
 
 def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
@@ -184,7 +216,6 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     warns += more
     if "input" in config:
         config["input"] = _absolute_input(config["input"])
-        _check_input_exists(config["input"], source, name)
     stop, more = legacy.translate_stop(
         _mapping(spec.get("stop") or {}, source, f"{name}.stop"), source, f"{name}.stop."
     )
@@ -286,6 +317,7 @@ def apply_overrides(
         offline = cfg.get("input", "sampler") != "sampler"
         if offline:  # data from files: few dataset passes, the file's env runners (often 0)
             cfg["dataset_num_iters_per_learner"] = TEST_DATASET_ITERS
+            _tiny_test_data(exp)
         else:
             cfg["num_env_runners"] = TEST_ENV_RUNNERS
             cfg["num_cpus_per_env_runner"] = TEST_CPUS_PER_ENV_RUNNER
@@ -572,6 +604,7 @@ def validate_env(exp: Experiment) -> None:
 
 def validate(exp: Experiment) -> Any:
     """Check everything that can be checked before Ray starts; return the first-point config."""
+    check_offline_input(exp)
     _check_grids(exp)
     _check_checkpoint_config(exp)
     algorithm_class(exp)

@@ -106,6 +106,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return e.code if isinstance(e.code, int) else 2
     if getattr(args, "verbose", False):
         os.environ[quiet.VERBOSE_ENV] = "1"
+    if args.command != "report":  # the commands that run Ray
+        quiet.quiet_driver()
     try:
         return int(args.func(args) or 0)
     except UsageError as e:

@@ -5,12 +5,13 @@
 `steps` is `num_env_steps_sampled_lifetime` (over the stop criterion when there is one), ETA
 extrapolates the trial's own rate to that criterion (or to `training_iteration`), `success` is
 the race's `race/success_rate`, `bonus` is ASOR's `asor/potential_share` (|λ·b| ÷ the env
-reward's scale) and `disc` its discriminator accuracy, each shown only when reported and
-while the line fits.
+reward's scale) and `disc` its discriminator accuracy, each shown only when reported (and
+finite: no `return` before the first episode ends) and while the line fits.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections.abc import Mapping
@@ -77,7 +78,8 @@ class LineReporter(ProgressReporter):
         tail = [] if status in ("RUNNING", "PENDING") else [status.lower()]
         for label, path, fmt in OPTIONAL:  # in order, as many as fit
             value = _get(result, path)
-            part = f"{label} {fmt.format(value)}" if isinstance(value, int | float) else None
+            shown = isinstance(value, int | float) and math.isfinite(value)
+            part = f"{label} {fmt.format(value)}" if shown else None
             if part and len("  ".join([*parts, part, *tail])) <= WIDTH:
                 parts.append(part)
         return "  ".join([*parts, *tail])[:WIDTH]

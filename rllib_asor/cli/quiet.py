@@ -27,11 +27,22 @@ HARMLESS = re.compile(
             "Checkpoint successfully created at",
             "Wrote the latest version of all result files",
             "Total run time:",
-            "obs returned by the `reset()` method is not within the observation space",
             "is deprecated and will be removed",  # Ray's own API moves (Tune, RLlib)
             "To visualize your results with TensorBoard",
             "View detailed results here",
             "If your trainable is slow to initialize",  # Tune, on a loaded machine
+            # Ray Data (offline runs): progress chatter and its own deprecations
+            "Starting execution of Dataset",
+            "Execution plan of Dataset",
+            "execution finished in",
+            "Data sink Parquet finished",
+            "A new progress UI is available",
+            "tqdm is not installed",
+            "The argument ``concurrency`` is deprecated",
+            "OfflinePreLearner(module_spec=..)",
+            "won't fully utilize the available concurrency",
+            "  warnings.warn(",  # the second line of a Python warning already dropped
+            "PYTHON worker processes have been started",  # raylet, fractional-CPU actors
         )
     )
 )
@@ -50,9 +61,11 @@ class _DropHarmless(logging.Filter):
 
 
 def quiet_driver() -> None:
-    """Filter the driver's loggers and Python warnings (call before `ray.init`)."""
+    """Filter the driver's loggers and Python warnings (imports Ray; again after `ray.init`)."""
     if verbose():
         return
+    import ray.rllib  # noqa: F401 - sets up the "ray" and "ray.rllib" handlers filtered here
+
     drop = _DropHarmless()
     for name in RAY_LOGGERS:
         logger = logging.getLogger(name)
@@ -61,8 +74,20 @@ def quiet_driver() -> None:
         for handler in logger.handlers:
             if not any(isinstance(f, _DropHarmless) for f in handler.filters):
                 handler.addFilter(drop)
-    warnings.filterwarnings("ignore", message=".*not within the observation space")
     warnings.filterwarnings("ignore", category=DeprecationWarning, module="ray")
+
+
+def import_quietly(module: str) -> None:
+    """Import `module` with its import-time warnings hidden (unless verbose); later imports
+    are cached. For RLlib's DreamerV3 debugging envs, imported while unpickling checkpoints,
+    which warn about their own float64 Box bounds and reset() dtype."""
+    import importlib
+
+    if verbose():
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        importlib.import_module(module)
 
 
 def quiet_worker_lines() -> None:

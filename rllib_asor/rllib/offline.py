@@ -339,6 +339,46 @@ def collect(
     return final
 
 
+TINY_STEPS = 200
+"""Env steps per (dynamics, quality) of `tiny_datasets` (a smoke run's data, not for results)."""
+
+
+def tiny_datasets(env_id: str, paths: Sequence[str], out: str | os.PathLike[str]) -> dict[str, str]:
+    """Build small stand-ins for dataset dirs `.../<task>/<dynamics>/<quality>` under `out`.
+
+    For `rllib train --test` on a fresh clone: TINY_STEPS env steps per (dynamics, quality)
+    with an untrained policy (512 training steps when medium-replay is asked for). Returns
+    {path: stand-in path}; paths not of that form are left out.
+    """
+    import ray
+
+    wanted: dict[str, tuple[str, str]] = {}
+    for path in paths:
+        parts = Path(path).parts
+        if len(parts) >= 3 and parts[-2] in DYNAMICS and parts[-1] in QUALITIES:
+            wanted[path] = (parts[-2], parts[-1])
+    if not wanted:
+        return {}
+    qualities = sorted({q for _, q in wanted.values()}, key=QUALITIES.index)
+    dynamics = sorted({d for d, _ in wanted.values()}, key=DYNAMICS.index)
+    started = not ray.is_initialized()
+    try:
+        root = collect(
+            env_id,
+            out,
+            TINY_STEPS,
+            dynamics=dynamics,
+            qualities=qualities,
+            train_steps=512 if "medium-replay" in qualities else 0,
+            overwrite=True,
+            log=lambda *_: None,
+        )
+    finally:
+        if started:  # the caller sizes its own Ray
+            ray.shutdown()
+    return {path: str(root / d / q) for path, (d, q) in wanted.items()}
+
+
 def _collect_dynamics(
     env_id: str,
     dyn: str,

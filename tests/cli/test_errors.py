@@ -197,7 +197,9 @@ def test_bad_curriculum_stage_exits_2(write_yaml, capsys):
 
 
 def test_asor_key_typo_suggests_the_key_and_is_not_cut(write_yaml, capsys):
-    rc, err = _run(capsys, ["train", "file", write_yaml(GOOD_HEAD + "  config: {asor: {lamda_: 0.1}}\n")])
+    rc, err = _run(
+        capsys, ["train", "file", write_yaml(GOOD_HEAD + "  config: {asor: {lamda_: 0.1}}\n")]
+    )
     assert rc == 2
     _assert_one_line(err, "'lamda_' (did you mean 'lambda_'?)", "allowed:", "seed")
 

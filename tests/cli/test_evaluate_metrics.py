@@ -14,8 +14,10 @@ def _episode(env_id: str, seed: int, **kwargs) -> SingleAgentEpisode:
     env.action_space.seed(seed)
     obs, info = env.reset(seed=seed)
     ep = SingleAgentEpisode(
-        observations=[obs], infos=[info],
-        observation_space=env.observation_space, action_space=env.action_space,
+        observations=[obs],
+        infos=[info],
+        observation_space=env.observation_space,
+        action_space=env.action_space,
     )
     done = False
     while not done:

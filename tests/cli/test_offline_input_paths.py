@@ -5,7 +5,7 @@ import os
 import pytest
 
 from rllib_asor.cli.errors import UsageError
-from rllib_asor.cli.experiment import parse_experiment
+from rllib_asor.cli.experiment import check_offline_input, parse_experiment
 
 
 def _input_of(value):
@@ -23,8 +23,16 @@ def test_relative_input_paths_become_absolute(tmp_path, monkeypatch):
 
 def test_missing_dataset_fails_before_ray_and_names_make_datasets(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(UsageError, match=r"x\.config\.input: offline input .*does not exist.*make datasets"):
-        _input_of(["data/offline/hopper/original/medium"])
+    spec = {
+        "env": "Pendulum-v1",
+        "run": "CQL",
+        "config": {"input": ["data/offline/hopper/original/medium"]},
+    }
+    exp = parse_experiment("x", spec, "x.yaml")
+    with pytest.raises(
+        UsageError, match=r"x\.config\.input: offline input .*does not exist.*make datasets"
+    ):
+        check_offline_input(exp)
 
 
 def test_sampler_and_uris_are_kept():
@@ -47,3 +55,25 @@ def test_offline_runs_reserve_cpus_for_ray_data():
     assert required_cpus(offline) == 4
     offline.offline_data(map_batches_kwargs={"concurrency": 1, "num_cpus": 0.5})
     assert offline_data_cpus(offline) == 1.5
+
+
+def test_offline_test_run_without_data_builds_tiny_stand_ins(tmp_path, monkeypatch, cli_ray):
+    """`--test` on a fresh clone (no `make datasets`): exit 0 on stand-in data, said up front."""
+    from tests.cli.test_e2e import REPO, run_cli
+
+    monkeypatch.chdir(tmp_path)  # no data/offline here
+    res = run_cli(
+        [
+            "train",
+            "file",
+            str(REPO / "tuned_examples/offline/cql-asor-hopper.yaml"),
+            "--test",
+            "--storage-path",
+            str(tmp_path / "runs"),
+        ]
+    )
+    assert res.rc == 0, res.err[-3000:]
+    assert "offline dataset(s) missing" in res.out and "make datasets" in res.err
+    assert "1 trial(s), 0 errored" in res.out
+    res = run_cli(["train", "file", str(REPO / "tuned_examples/offline/cql-asor-hopper.yaml")])
+    assert res.rc == 2 and "make datasets" in res.err  # a real run still refuses

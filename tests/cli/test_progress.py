@@ -40,6 +40,8 @@ def test_line_without_optional_metrics_or_stop_has_no_eta_and_stays_short():
     bare = {"training_iteration": 3, "num_env_steps_sampled_lifetime": 512, "time_total_s": 2.0}
     line = LineReporter().line(7, "TERMINATED", bare)
     assert line == "[7] it 3  steps 512  256/s  terminated"
+    no_episode_yet = dict(bare, env_runners={"episode_return_mean": float("nan")})
+    assert LineReporter().line(7, "TERMINATED", no_episode_yet) == line
 
 
 def test_reporter_prints_each_new_result_once_and_skips_pending():
