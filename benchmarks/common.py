@@ -59,17 +59,6 @@ def mean_std(xs: Sequence[float]) -> str:
     return f"{np.mean(xs):.1f} ± {sd:.1f}"
 
 
-def bootstrap_ci(x: np.ndarray) -> tuple[float, float]:
-    """95% bootstrap confidence interval of the mean (scipy); degenerate for n < 2."""
-    from scipy.stats import bootstrap
-
-    x = np.asarray(x, dtype=float)
-    if len(x) < 2 or np.allclose(x, x[0]):
-        return float(x.mean()), float(x.mean())
-    res = bootstrap((x,), np.mean, confidence_level=0.95, n_resamples=5000, random_state=0)
-    return float(res.confidence_interval.low), float(res.confidence_interval.high)
-
-
 def run_method_seed_grid(
     trainable: Callable[[dict[str, Any]], Any],
     methods: Iterable[tuple[str, dict[str, Any] | None]],

@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import bootstrap_ci, run_method_seed_grid, start_local_ray, write_json
+from benchmarks.common import run_method_seed_grid, start_local_ray, write_json
+from rllib_asor.report.stats import bootstrap_ci
 
 DEFAULT_METHODS = (
     "ppo",

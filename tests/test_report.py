@@ -419,3 +419,19 @@ def test_headline_columns_show_each_metric_once_without_per_map_copies() -> None
     assert report.headline_columns(keys) == [
         "asor/bonus_share", "asor/disc_acc", "race/success_rate", "race/trapped_rate",
     ]
+
+
+def test_one_bootstrap_ci_for_reports_and_benchmarks() -> None:
+    """`rllib report` and the benchmark tables use the same interval (one implementation)."""
+    import numpy as np
+
+    import benchmarks.lava_reproduction as lava
+    import rllib_asor.cli.report as report
+    from rllib_asor.report.stats import bootstrap_ci
+
+    assert report.bootstrap_ci is bootstrap_ci and lava.bootstrap_ci is bootstrap_ci
+    lo, hi = bootstrap_ci([0.1, 0.5, 0.7, 0.2, 0.9])
+    assert lo < float(np.mean([0.1, 0.5, 0.7, 0.2, 0.9])) < hi
+    assert (lo, hi) == bootstrap_ci([0.1, 0.5, 0.7, 0.2, 0.9])  # seeded: reproducible
+    assert bootstrap_ci([3.0, 3.0]) == (3.0, 3.0)
+    assert all(np.isnan(bootstrap_ci([1.0])))

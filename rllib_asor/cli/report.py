@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from rllib_asor.report.stats import bootstrap_ci, iqm, mean_std
+
 DEFAULT_METRIC = "env_runners/episode_return_mean"
 DEFAULT_X = "num_env_steps_sampled_lifetime"
 FALLBACK_X = "training_iteration"
@@ -279,40 +281,6 @@ def assign_groups(trials: Iterable[Trial], group_by: str | None = None) -> None:
 # --------------------------------------------------------------------------- statistics
 
 
-def bootstrap_ci(values: Sequence[float], confidence: float = 0.95) -> tuple[float, float]:
-    """Percentile bootstrap CI of the mean (fixed seed, reproducible); NaNs for n < 2."""
-    from scipy.stats import bootstrap
-
-    arr = np.asarray(values, dtype=float)
-    if arr.size < 2:
-        return math.nan, math.nan
-    if np.all(arr == arr[0]):
-        return float(arr[0]), float(arr[0])
-    res = bootstrap(
-        (arr,),
-        np.mean,
-        confidence_level=confidence,
-        n_resamples=9999,
-        method="percentile",
-        rng=np.random.default_rng(0),
-    )
-    return float(res.confidence_interval.low), float(res.confidence_interval.high)
-
-
-def iqm(values: Sequence[float]) -> float:
-    """Interquartile mean: mean of the middle 50% (scipy's trim_mean with 0.25 cut)."""
-    from scipy.stats import trim_mean
-
-    return float(trim_mean(np.asarray(values, dtype=float), 0.25))
-
-
-def _mean_std(vals: Sequence[float]) -> tuple[float, float]:
-    arr = np.asarray([v for v in vals if math.isfinite(v)], dtype=float)
-    if arr.size == 0:
-        return math.nan, math.nan
-    return float(arr.mean()), float(arr.std(ddof=1)) if arr.size > 1 else 0.0
-
-
 def _is_headline(key: str) -> bool:
     """A headline race/... or asor/... metric (over all maps and policies)."""
     parts = key.split("/")
@@ -379,10 +347,10 @@ def summarize(
         keyed.setdefault((t.env, t.method), []).append(t)
     for (env, method), members in sorted(keyed.items()):
         finals = [t.final(metric, last_n) for t in members]
-        mean, std = _mean_std(finals)
+        mean, std = mean_std(finals)
         lo, hi = bootstrap_ci(finals)
         steps = float(np.nanmean([t.final(x, 1) for t in members]))
-        extra = {c: _mean_std([t.final(c, last_n) for t in members]) for c in columns}
+        extra = {c: mean_std([t.final(c, last_n) for t in members]) for c in columns}
         groups.append(
             GroupStats(
                 env, method, len(members), mean, std, lo, hi, iqm(finals), steps, finals, extra

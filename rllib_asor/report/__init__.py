@@ -1,0 +1,1 @@
+"""Reporting: statistics over seeds (`stats`), shared by `rllib report` and the benchmarks."""
