@@ -235,3 +235,27 @@ def test_help_lists_every_setting_with_its_doc():
         for name in ("preset", "lambda_", "real_source", "archive_size", "disc_grad_penalty"):
             assert f"    {name} = " in doc, name
     assert "paper 'log'" in AsorConfig.__doc__  # the paper preset's value beside the default
+
+
+def test_batch_norm_keeps_the_bonus_share_when_the_discriminator_drifts():
+    """The measured failure of `bonus_norm: running` (race/Hopper after 250k steps: potential
+    share 3.5-5x below the lava world's): running statistics remember an earlier, wider logit
+    distribution. Per-batch statistics do not."""
+
+    def share_before_and_after_drift(norm: str) -> tuple[float, float]:
+        cfg = AsorConfig(mode="srpo", bonus_norm=norm, seed=0)
+        torch.manual_seed(0)
+        state = AsorState(cfg, feature_dim=3)
+        rng = np.random.default_rng(0)
+        w0 = state.disc.net[-1].weight.data.clone()
+        shares = []
+        for i in range(60):  # a confident discriminator, then a much less confident one
+            state.disc.net[-1].weight.data = w0 * (4.0 if i < 30 else 0.25)
+            result = asor_update(cfg, state, None, _episodes_batch(1.0, seed=i), rng)
+            shares.append(result.metrics["potential_share"])
+        return shares[29], shares[-1]
+
+    before, after = share_before_and_after_drift("batch")
+    assert 0.5 <= after / before <= 2.0
+    before, after = share_before_and_after_drift("running")
+    assert after / before < 0.5
