@@ -23,6 +23,7 @@ import yaml
 
 from rllib_asor.cli import grid, legacy, multi_agent
 from rllib_asor.cli.errors import UsageError
+from rllib_asor.rllib.env_families import families_with_curriculum, family_of
 
 SPEC_KEYS = ("env", "run", "stop", "config", "checkpoint_config", "num_samples", "storage_path")
 CHECKPOINT_KEYS = (
@@ -62,9 +63,6 @@ TEST_CPUS_PER_ENV_RUNNER = 0.5
 TEST_BATCH = 256
 TEST_MINIBATCH = 64
 TEST_DATASET_ITERS = 2
-TEST_RACE_EPISODE_STEPS = 100
-"""`--test` on a race env (game_env/*): episode limit, so episodes end (and `race/*` metrics
-appear) within the 2 × 256 env steps."""
 
 
 @dataclass
@@ -322,10 +320,9 @@ def apply_overrides(
             cfg["num_env_runners"] = TEST_ENV_RUNNERS
             cfg["num_cpus_per_env_runner"] = TEST_CPUS_PER_ENV_RUNNER
             cfg["num_envs_per_env_runner"] = 1
-            if exp.env.startswith("game_env/"):
-                env_config = dict(cfg.get("env_config") or {})
-                env_config["max_episode_steps"] = TEST_RACE_EPISODE_STEPS
-                cfg["env_config"] = env_config
+            family = family_of(exp.env)
+            if family is not None and family.test_env_config:
+                cfg["env_config"] = {**(cfg.get("env_config") or {}), **family.test_env_config}
         cfg["num_learners"] = 0
         cfg["evaluation_interval"] = None
         cfg.pop("train_batch_size_per_learner", None)
@@ -455,6 +452,9 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
                 raise UsageError(
                     _one_line(e), source=exp.source, key=f"{exp.name}.config.multi_agent"
                 ) from None
+        family = family_of(exp.env)
+        if rl_module is None and family is not None and family.default_module is not None:
+            rl_module = {"module_class": family.default_module}
         if rl_module is not None:
             cfg.rl_module(rl_module_spec=_module_spec(rl_module, exp))
         cfg.environment(env=exp.env, env_config=env_config)
@@ -468,12 +468,12 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
             raise UsageError(
                 f"invalid value: {_one_line(e)}", source=exp.source, key=f"{exp.name}.config"
             ) from None
-        if exp.env.startswith("game_env/") and not {"callbacks", "callbacks_class"} & set(
-            exp.config
-        ):  # the race's metrics (race/...) unless the file names its own callbacks
-            from rllib_asor.rllib.race import RaceMetricsCallback
-
-            cfg.callbacks(RaceMetricsCallback)
+        if (
+            family is not None
+            and family.metrics_callbacks is not None
+            and not {"callbacks", "callbacks_class"} & set(exp.config)
+        ):  # the family's metrics (race/...) unless the file names its own callbacks
+            cfg.callbacks(family.metrics_callbacks())
         if curriculum is not None:
             from rllib_asor.rllib.callbacks import add_callbacks
 
@@ -482,20 +482,21 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
 
 
 def _curriculum(block: Any, exp: Experiment) -> Any:
-    """The callback class for a ``curriculum:`` block (game_env envs only), or None."""
+    """The callback class for a ``curriculum:`` block (envs whose family has one), or None."""
     if block is None:
         return None
     key = f"{exp.name}.config.curriculum"
-    if not exp.env.startswith("game_env/"):
+    family = family_of(exp.env)
+    if family is None or family.curriculum is None:
+        allowed = ", ".join(families_with_curriculum())
         raise UsageError(
-            f"a map curriculum needs a race env; allowed envs: game_env/... (got {exp.env!r})",
+            f"a curriculum needs an env that supports one; allowed envs: {allowed} "
+            f"(got {exp.env!r})",
             source=exp.source,
             key=key,
         )
-    from rllib_asor.rllib.curriculum import MapCurriculum, map_curriculum_callback
-
     try:
-        return map_curriculum_callback(MapCurriculum.from_dict(block))
+        return family.curriculum(block)
     except (TypeError, ValueError) as e:
         raise UsageError(_one_line(e), source=exp.source, key=key) from None
 

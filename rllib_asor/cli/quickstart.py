@@ -20,6 +20,7 @@ from typing import Any
 
 from rllib_asor.cli import train
 from rllib_asor.cli.errors import UsageError
+from rllib_asor.rllib.env_families import RACE, family_of
 
 DEFAULT_FILE = "tuned_examples/race/ppo-asor-quickstart.yaml"
 FULL_RUN = "tuned_examples/race/ppo-asor-curriculum.yaml"
@@ -74,9 +75,9 @@ def run(args: argparse.Namespace) -> int:
     train_s = time.monotonic() - t0
     if train.print_summary(exp, results):
         return 1
-    if not exp.env.startswith("game_env/"):
+    if family_of(exp.env) is not RACE:
         raise UsageError(
-            f"{exp.env!r} is not the race: allowed a game_env/* experiment", source=path
+            f"{exp.env!r} is not the race: allowed envs {', '.join(p + '...' for p in RACE.prefixes)}", source=path
         )
     result = results[0]
     out = Path(train.storage_path(train_args, exp), exp.name, "report")
