@@ -120,14 +120,15 @@ def _absolute_input(value: Any) -> Any:
     return value
 
 
-def _missing_inputs(value: Any) -> list[str]:
+def missing_inputs(value: Any) -> list[str]:
+    """The local paths of an offline `input` value that do not exist."""
     paths = value if isinstance(value, list) else [value]
     return [p for p in paths if isinstance(p, str) and os.path.isabs(p) and not os.path.exists(p)]
 
 
 def check_offline_input(exp: Experiment) -> None:
     """A local offline `input` that does not exist fails here, before Ray starts."""
-    missing = _missing_inputs(exp.config.get("input"))
+    missing = missing_inputs(exp.config.get("input"))
     if missing:
         hint = (
             "; make the offline datasets first: `make datasets` (about 10 minutes on 2 cores, "
@@ -144,7 +145,7 @@ def check_offline_input(exp: Experiment) -> None:
 
 def _tiny_test_data(exp: Experiment) -> None:
     """--test on a fresh clone: stand-ins for the missing datasets, in a temporary folder."""
-    missing = _missing_inputs(exp.config.get("input"))
+    missing = missing_inputs(exp.config.get("input"))
     if not missing:
         return
     import atexit

@@ -23,14 +23,8 @@ RACE_YAMLS = sorted((REPO / "tuned_examples/race").glob("*.yaml")) + sorted(
 )
 
 
-def test_race_examples_exist():
-    names = {p.name for p in RACE_YAMLS}
-    assert {"ppo.yaml", "ppo-srpo.yaml", "ppo-asor.yaml", "ppo-asor-multi.yaml"} <= names
-    assert "race-asor.yaml" in names
-
-
 @pytest.mark.parametrize("path", RACE_YAMLS, ids=lambda p: p.name)
-def test_race_example_validates_with_paper_settings(path):
+def test_race_example_gets_the_race_network_metrics_and_asor_inputs(path):
     for exp in E.load_file(str(path)):
         cfg = E.validate(exp)
         assert exp.warnings == []  # no legacy keys in our own examples
@@ -39,10 +33,6 @@ def test_race_example_validates_with_paper_settings(path):
         callbacks = cfg.callbacks_class
         callbacks = callbacks if isinstance(callbacks, list) else [callbacks]
         assert callbacks[0].__name__ == "RaceMetricsCallback"
-        assert cfg.train_batch_size == 1024 and cfg.entropy_coeff == 0.003
-        assert cfg.lr[0] == [0, 1e-3] and cfg.lr[-1][1] == 3e-4
-        assert cfg.num_env_runners == 2 and cfg.num_cpus_per_env_runner == 0.5
-        assert cfg.env_config["map_id"] == "random"
         if exp.asor is not None:
             assert exp.asor["obs_keys"] == ["agent", "destination"]
         if exp.env.endswith("Multi-v0"):
