@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     import rllib_asor.envs  # noqa: F401
 
     start_local_ray(4)
-    from rllib_asor.rllib.envs import register_with_tune
+    from rllib_asor.rllib.env_registration import register_with_tune
 
     register_with_tune(args.env)  # remote env runners build our ids through Tune's registry
     algos = {"PPO": build(args.env, False, args), "PPO+ASOR": build(args.env, True, args)}

@@ -201,7 +201,7 @@ def build_algo(args: argparse.Namespace) -> Any:
     from ray.rllib.algorithms.ppo import PPOConfig
 
     import rllib_asor
-    from rllib_asor.rllib.envs import register_with_tune
+    from rllib_asor.rllib.env_registration import register_with_tune
     from rllib_asor.rllib.faults import with_fault_tolerance
 
     env = "rllib_asor/LavaWorld-v0"

@@ -577,7 +577,7 @@ def validate_env(exp: Experiment) -> None:
     """The env id must be registered, and the env must build with each `env_config` candidate."""
     import gymnasium as gym
 
-    from rllib_asor.rllib import envs
+    from rllib_asor.rllib import env_registration as envs
 
     with _quiet():
         if not envs.env_exists(exp.env):

@@ -163,7 +163,7 @@ def _fit(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
     from ray import tune
 
     from rllib_asor.cli.progress import LineReporter
-    from rllib_asor.rllib import envs
+    from rllib_asor.rllib import env_registration as envs
 
     envs.register_with_tune(exp.env)
     trainable = _trainable(exp)

@@ -24,7 +24,7 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
 from rllib_asor.asor.config import ALGORITHMS, AsorConfig
 from rllib_asor.rllib.callbacks import AsorMetricsCallback, add_callbacks
-from rllib_asor.rllib.envs import register_with_tune
+from rllib_asor.rllib.env_registration import register_with_tune
 from rllib_asor.rllib.fast_sac import FAST_KEY, fast_off_policy
 from rllib_asor.rllib.learners import (
     AsorCQLTorchLearner,

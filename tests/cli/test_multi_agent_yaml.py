@@ -13,7 +13,8 @@ import pytest
 from rllib_asor.cli import experiment as E
 from rllib_asor.cli import multi_agent
 from rllib_asor.cli.errors import UsageError
-from rllib_asor.rllib import envs
+from rllib_asor.rllib import env_registration as envs
+from rllib_asor.rllib.env_families import RACE
 
 MULTI = """
 x:
@@ -141,5 +142,5 @@ def test_test_mode_shortens_race_episodes_so_race_metrics_appear(write_yaml):
         )
     )
     E.apply_overrides(exp, test=True)
-    assert exp.config["env_config"] == {"map_id": 3, "max_episode_steps": E.TEST_RACE_EPISODE_STEPS}
-    assert E.validate(exp).env_config["max_episode_steps"] == E.TEST_RACE_EPISODE_STEPS
+    assert exp.config["env_config"] == {"map_id": 3, "max_episode_steps": RACE.test_env_config["max_episode_steps"]}
+    assert E.validate(exp).env_config["max_episode_steps"] == RACE.test_env_config["max_episode_steps"]
