@@ -42,6 +42,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "disc_logit_reg": 0.01,
         "disc_weight_decay": 1e-4,
         "disc_input_norm": True,
+        "bonus_share_max": 0.2,
     },
     # The paper as stated: λ·log ω on the current batch's partition, a fixed absolute λ.
     "paper": {
@@ -57,6 +58,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "disc_logit_reg": 0.0,
         "disc_weight_decay": 0.0,
         "disc_input_norm": False,
+        "bonus_share_max": 0.0,
     },
 }
 """Values of the preset-dependent fields; a field given explicitly always wins."""
@@ -163,6 +165,13 @@ class AsorConfig:
     """Upper bound of λ for lambda_ == "auto"."""
     lambda_init: float = 0.0
     """Starting λ for lambda_ == "auto"."""
+    lambda_kp: float = 0.0
+    """Proportional gain of lambda_ == "auto": λ = clip(λ_I + Kp·(d̂ − ε), 0, λ_max), λ_I the
+    dual-ascent (integral) term — the PI-Lagrangian of Stooke et al. 2020; 0 = dual ascent."""
+    bonus_share_max: float | None = None
+    """Cap on the bonus's size: mean |λ·b(s)| ≤ this × the env reward's running scale in every
+    batch (λ is scaled down when it would exceed it; `asor/share_capped` says when). 0 = no
+    cap. Preset robust 0.2, paper 0."""
     obs_keys: list[str] | None = None
     """For Dict observations: the keys the discriminator and proxy see (None = all, flattened)."""
     seed: int | None = None
@@ -233,7 +242,7 @@ class AsorConfig:
                 or v < (2 if key == "ensemble_size" else 1)
             ):
                 _fail(key, v, "an integer ≥ 2" if key == "ensemble_size" else "an integer ≥ 1")
-        for key in ("lambda_target", "lambda_max", "lambda_init"):
+        for key in ("lambda_target", "lambda_max", "lambda_init", "lambda_kp", "bonus_share_max"):
             v = getattr(self, key)
             if not _is_number(v) or v < 0:
                 _fail(key, v, "a finite number ≥ 0")

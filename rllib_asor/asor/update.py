@@ -10,7 +10,8 @@ proxy on the batches it returns (the rewards use ω from *before* that training 
              archive of the best episodes per dynamics (robust default)
     4. ω(s): the discriminator's logits on the batch, before its own update
     5. b(s): the bonus form, normalised by its running statistics, optionally shaped
-    6. λ:    schedule / auto, × the env reward's running scale, 0 during the warm-up
+    6. λ:    schedule / auto (PI-Lagrangian), × the env reward's running scale, 0 during the
+             warm-up, capped so that |λ·b| stays ≤ bonus_share_max × that scale
     7. r ← r + λ·(γ·b(s′) − b(s))  (potential form, default)  or  r + λ·b(s)  (paper)
 """
 
@@ -188,13 +189,17 @@ def asor_update(
         state.critic_ready.fill_(1.0)
     active = bool(state.critic_ready.item()) and has_real
     lam_eff = lam * scale if active else 0.0
+    rms = max(reward_scale(state.reward_rms), 1e-8)
+    share = lam_eff * float(potential_of.abs().mean()) / rms if n else 0.0
+    capped = 0.0 < cfg.bonus_share_max < share
+    if capped:  # the cap on the bonus's share of the reward
+        lam_eff *= cfg.bonus_share_max / share
     # 7. The amount added to the rewards.
     delta = (lam_eff * bonus).to(batch.env_rewards.dtype)
     if not torch.isfinite(delta).all():
         raise ValueError("ASOR: the reward bonus is NaN/inf")
     metrics = _metrics(state, lam_eff, scale, bonus, delta, logits, batch, batch_real, labels)
     if metrics:
-        rms = max(reward_scale(state.reward_rms), 1e-8)
         metrics.update(
             {
                 # |λ·b| / reward scale for the per-step amount added and for the bonus
@@ -203,6 +208,7 @@ def asor_update(
                 "potential_share": float((lam_eff * potential_of).abs().mean() / rms),
                 "critic_ev": ev if ev is not None else float("nan"),
                 "active": float(active),
+                "share_capped": float(capped),
                 "potential": float(potential),
             }
         )
@@ -224,14 +230,16 @@ def _bonus_normaliser(
 
 
 def _lambda(cfg: AsorConfig, state: AsorState, js_estimate: float, timestep: float) -> float:
-    """λ before scaling; with "auto", one dual-ascent step on this batch's JS estimate."""
+    """λ before scaling; with "auto", the PI-Lagrangian on this batch's JS estimate: the
+    integral (dual-ascent) term from earlier batches plus Kp × this batch's violation."""
     if cfg.lambda_ != "auto":
         return scheduled_lambda(cfg.lambda_, timestep)
-    lam = float(state.auto_lambda.item())
+    integral = float(state.auto_lambda.item())
     state.auto_lambda.fill_(
-        dual_ascent_step(lam, js_estimate, cfg.lambda_target, cfg.lambda_lr, cfg.lambda_max)
+        dual_ascent_step(integral, js_estimate, cfg.lambda_target, cfg.lambda_lr, cfg.lambda_max)
     )
-    return lam
+    proportional = cfg.lambda_kp * (js_estimate - cfg.lambda_target)
+    return float(min(max(integral + proportional, 0.0), cfg.lambda_max))
 
 
 def _critic_ev(batch: AsorBatch) -> float | None:

@@ -259,3 +259,30 @@ def test_batch_norm_keeps_the_bonus_share_when_the_discriminator_drifts():
     assert 0.5 <= after / before <= 2.0
     before, after = share_before_and_after_drift("running")
     assert after / before < 0.5
+
+
+def test_bonus_share_cap_scales_lambda_down_only_when_exceeded():
+    _, results = _run(AsorConfig(mode="srpo", lambda_=1.0, seed=0), 1.0)
+    capped = results[-1].metrics
+    assert capped["share_capped"] == 1.0
+    assert capped["potential_share"] == pytest.approx(0.2, rel=1e-4)  # the robust preset's cap
+    _, results = _run(AsorConfig(mode="srpo", seed=0), 1.0)  # λ 0.05: far below the cap
+    assert results[-1].metrics["share_capped"] == 0.0
+    assert 0 < results[-1].metrics["potential_share"] < 0.2
+    _, results = _run(AsorConfig(mode="srpo", lambda_=1.0, bonus_share_max=0.0, seed=0), 1.0)
+    assert results[-1].metrics["share_capped"] == 0.0 and results[-1].metrics["potential_share"] > 0.2
+
+
+def test_auto_lambda_is_a_pi_lagrangian_on_the_js_estimate():
+    from rllib_asor.asor.update import _lambda
+
+    cfg = AsorConfig(lambda_="auto", lambda_lr=0.1, lambda_kp=2.0, lambda_target=0.1)
+    state = AsorState(cfg, feature_dim=3)
+    # Violation 0.2: the P term acts at once (2 × 0.2), the I term from the next batch on.
+    assert _lambda(cfg, state, 0.3, 0.0) == pytest.approx(0.4)
+    assert _lambda(cfg, state, 0.3, 0.0) == pytest.approx(0.02 + 0.4)
+    # Satisfied (d̂ < ε): the P term pulls λ down, clipped at 0.
+    assert _lambda(cfg, state, 0.0, 0.0) == pytest.approx(max(0.04 - 0.2, 0.0))
+    pure = AsorConfig(lambda_="auto", lambda_lr=0.1, lambda_target=0.1)  # Kp 0: dual ascent
+    state = AsorState(pure, feature_dim=3)
+    assert [_lambda(pure, state, 0.3, 0.0) for _ in range(3)] == pytest.approx([0.0, 0.02, 0.04])
