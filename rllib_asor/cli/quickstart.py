@@ -28,6 +28,8 @@ FULL_RUN_STEPS = 2_000_000
 GIF_MAP = 2
 """Map of the GIF ("stairs"): one of the two shortest courses, the curriculum's first stage."""
 TEST_EPISODE_STEPS = 100
+REPORT_LAST_N = 10
+"""Training metrics in the report: mean of the last 10 iterations (one is a handful of episodes)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -77,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
         return 1
     if family_of(exp.env) is not RACE:
         raise UsageError(
-            f"{exp.env!r} is not the race: allowed envs {', '.join(p + '...' for p in RACE.prefixes)}", source=path
+            f"{exp.env!r} is not the race: allowed envs {', '.join(p + '...' for p in RACE.prefixes)}",
+            source=path,
         )
     result = results[0]
     out = Path(train.storage_path(train_args, exp), exp.name, "report")
@@ -86,7 +89,10 @@ def run(args: argparse.Namespace) -> int:
     files, evaluation = _evaluate_and_record(result.checkpoint.path, out, args.episodes, max_steps)
     from rllib_asor.cli.report import make_report
 
-    files["report"] = make_report(Path(out).parent, out)
+    report = make_report(Path(out).parent, out, last_n=REPORT_LAST_N)
+    with report.open("a", encoding="utf-8") as f:  # the number that matters, in the report too
+        f.write(_evaluation_section(evaluation, max_steps))
+    files["report"] = report
     files["curves"] = next(out.glob("curves_*.png"), None)
     _print_final(exp, result, evaluation, files, train_s, args.test)
     return 0
@@ -115,23 +121,38 @@ def _evaluate_and_record(
     checkpoint: str, out: Path, episodes: int, max_steps: int
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The race evaluation (stochastic policy, as the studies) and a GIF; their files."""
-    from rllib_asor.evaluation.race import COLUMNS, evaluate, load_module, module_policy, record_gif
+    from rllib_asor.evaluation.race import evaluate, load_module, module_policy, record_gif
 
     policy = module_policy(load_module(checkpoint), explore=True)
     evaluation = evaluate(policy, episodes, max_steps)
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, Any] = {"checkpoint": checkpoint}
     files["evaluation"] = _write(out / "race_eval.json", json.dumps(evaluation, indent=1) + "\n")
-    rows = ["| map | " + " | ".join(t for _, t in COLUMNS) + " |", "|---|" + "---|" * len(COLUMNS)]
-    for m, values in [*evaluation["per_map"].items(), ("mean", evaluation["mean"])]:
-        rows.append(f"| {m} | " + " | ".join(f"{values[k]:.3f}" for k, _ in COLUMNS) + " |")
-    _write(out / "race_eval.md", "\n".join(rows) + "\n")
+    _write(out / "race_eval.md", _evaluation_table(evaluation))
     gif = out / "racer.gif"
     episode = record_gif(policy, gif, GIF_MAP, max_steps=max_steps)
     files["gif"] = (
         f"{gif} (map {GIF_MAP}, {'finished' if episode.get('success') else 'not finished'})"
     )
     return files, evaluation
+
+
+def _evaluation_table(evaluation: dict[str, Any]) -> str:
+    from rllib_asor.evaluation.race import COLUMNS
+
+    rows = ["| map | " + " | ".join(t for _, t in COLUMNS) + " |", "|---|" + "---|" * len(COLUMNS)]
+    for m, values in [*evaluation["per_map"].items(), ("mean", evaluation["mean"])]:
+        rows.append(f"| {m} | " + " | ".join(f"{values[k]:.3f}" for k, _ in COLUMNS) + " |")
+    return "\n".join(rows) + "\n"
+
+
+def _evaluation_section(evaluation: dict[str, Any], max_steps: int) -> str:
+    n = len(evaluation["episodes"])
+    return (
+        f"\n## Evaluation on unseen courses\n\n{n} episodes ({n // len(evaluation['per_map'])} "
+        f"per map, course seeds never drawn in training, stochastic policy, at most {max_steps} "
+        f"steps), `rllib_asor.evaluation.race`:\n\n{_evaluation_table(evaluation)}"
+    )
 
 
 def _write(path: Path, text: str) -> Path:

@@ -383,6 +383,9 @@ def _atomic_write(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's 0600 -> the usual mode of a new file
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -480,7 +483,7 @@ def render_markdown(report: Report, results_dir: Path, plots: dict[str, str]) ->
         f"- metric: `{report.metric}`; final value per trial = mean of its last "
         f"{report.last_n} iteration(s)",
         "- per method: trials (seeds), final mean ± std (sample std), 95% bootstrap CI of the "
-        "mean (percentile, 9999 resamples), IQM (25% trimmed mean), env steps "
+        "mean (BCa, 5,000 resamples), IQM (25% trimmed mean), env steps "
         f"(mean final `{report.x}`)",
         "",
     ]

@@ -20,7 +20,10 @@ def test_quickstart_smoke_trains_evaluates_reports_and_records(tmp_path, cli_ray
     assert 0.0 <= evaluation["mean"]["success"] <= 1.0
     frames = imageio.mimread(report / "racer.gif")
     assert len(frames) > 10 and frames[0].ndim == 3
-    assert (report / "report.md").read_text().startswith("#")
+    text = (report / "report.md").read_text()
+    assert text.startswith("#") and "## Evaluation on unseen courses" in text
+    assert f"| mean | {evaluation['mean']['success']:.3f} |" in text
+    assert oct((report / "report.md").stat().st_mode & 0o777) != oct(0o600)  # not mkstemp's mode
     assert list(report.glob("curves_*.png"))
     lines = res.out.strip().splitlines()
     # Every file the summary names exists; the success rate is the last line.
