@@ -49,7 +49,7 @@ TRAIN_STEPS   ?= 200000
 .PHONY: datasets
 datasets: $(STAMP)
 	for env in $(DATASET_ENVS); do \
-	  nice $(PY) -m rllib_asor.rllib.offline collect --env $$env --out data/offline \
+	  nice $(VENV)/bin/rllib data collect --env $$env --out data/offline \
 	    --steps $(DATASET_STEPS) --trainer $(TRAINER) --train-steps $(TRAIN_STEPS) --overwrite || exit 1; \
 	done
 

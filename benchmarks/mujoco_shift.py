@@ -121,7 +121,7 @@ def ppo_config(task: str, seed: int, asor: dict[str, Any] | None, args: argparse
     from ray.rllib.connectors.env_to_module import MeanStdFilter
 
     import rllib_asor
-    from rllib_asor.rllib.offline import MUJOCO_PPO_MODEL, MUJOCO_PPO_TRAINING
+    from rllib_asor.data.collect import MUJOCO_PPO_MODEL, MUJOCO_PPO_TRAINING
 
     config = (
         PPOConfig()

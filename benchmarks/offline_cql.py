@@ -4,9 +4,9 @@ Every (method, seed) run trains CQL (tuned_examples/offline/ settings) on one da
 mixed over the three dynamics (`original`, `body_mass`, `density_10`: the paper's offline
 setting) for the same number of gradient updates, then scores the deterministic policy under
 each dynamics with D4RL's normalised score against the dataset's own random and expert
-returns (`rllib_asor.rllib.offline.evaluate`).
+returns (`rllib_asor.data.scoring.evaluate`).
 
-    make datasets                          # or: python -m rllib_asor.rllib.offline collect ...
+    make datasets                          # or: rllib data collect ...
     python -m benchmarks.offline_cql --data data/offline/hopper --quality medium --seeds 3 \\
         --iters 20 --iter-updates 100 --out benchmarks/out/offline_cql
 
@@ -39,7 +39,7 @@ def cql_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
     from ray.rllib.algorithms.cql import CQLConfig
 
     import rllib_asor
-    from rllib_asor.rllib import offline
+    from rllib_asor.rllib.offline import offline_input
 
     config = (
         CQLConfig()
@@ -61,7 +61,7 @@ def cql_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
         .evaluation(evaluation_interval=None)
         .debugging(seed=seed, log_level="ERROR")
     )
-    offline.offline_input(
+    offline_input(
         config, args.data, quality=args.quality, dataset_num_iters_per_learner=args.iter_updates
     )
     if asor is not None:
@@ -70,7 +70,7 @@ def cql_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
 
 
 def run_one(method: str, seed: int, asor: dict[str, Any] | None, args: argparse.Namespace) -> dict:
-    from rllib_asor.rllib import offline
+    from rllib_asor.data.scoring import evaluate
 
     algo = cql_config(seed, asor, args).build_algo()
     t0, result = time.time(), {}
@@ -80,7 +80,7 @@ def run_one(method: str, seed: int, asor: dict[str, Any] | None, args: argparse.
             if (i + 1) % 5 == 0:
                 print(f"  {method} seed={seed} iter {i + 1} t={time.time() - t0:.0f}s", flush=True)
         wall = time.time() - t0
-        ev = offline.evaluate(algo, args.data, episodes=args.eval_episodes, seed=1000 + seed)
+        ev = evaluate(algo, args.data, episodes=args.eval_episodes, seed=1000 + seed)
     finally:
         algo.stop()
     return {

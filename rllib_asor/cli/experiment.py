@@ -152,7 +152,7 @@ def _tiny_test_data(exp: Experiment) -> None:
     import shutil
     import tempfile
 
-    from rllib_asor.rllib.offline import TINY_STEPS, tiny_datasets
+    from rllib_asor.data.collect import TINY_STEPS, tiny_datasets
 
     tmp = tempfile.mkdtemp(prefix="rllib-asor-test-data-")
     atexit.register(shutil.rmtree, tmp, ignore_errors=True)

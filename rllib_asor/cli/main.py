@@ -1,4 +1,4 @@
-"""`rllib` command: argument parsing and dispatch to train / evaluate / report."""
+"""`rllib` command: argument parsing and dispatch to train / evaluate / report / data."""
 
 from __future__ import annotations
 
@@ -32,13 +32,13 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The full `rllib` parser."""
-    from rllib_asor.cli import evaluate, quickstart, train
+    from rllib_asor.cli import data, evaluate, quickstart, train
 
     parser = _Parser(
         prog="rllib", description="Train and evaluate RLlib (new API stack) agents, with ASOR."
     )
     parser.add_argument("--version", action="version", version=_version())
-    sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report,quickstart}")
+    sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report,quickstart,data}")
     sub.required = True
     p_train = sub.add_parser(
         "train",
@@ -68,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     else:
         p_report.add_argument("rest", nargs=argparse.REMAINDER)
         p_report.set_defaults(func=_report_missing)
+    p_data = sub.add_parser("data", help="offline datasets: collect, info, score (docs/offline.md)")
+    data.add_arguments(p_data, common=_add_verbose)
+    p_data.set_defaults(func=data.run)
     return parser
 
 

@@ -15,7 +15,11 @@ from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
 import rllib_asor
 from rllib_asor.asor.reward import reward_bonus
-from rllib_asor.rllib import offline
+from rllib_asor.cli.main import main as rllib_main
+from rllib_asor.data.collect import collect
+from rllib_asor.data.format import FORMAT, load_dataset, read_manifest
+from rllib_asor.data.scoring import normalized_score
+from rllib_asor.rllib.offline import offline_input
 
 ENV = "rllib_asor/HopperShift-v0"
 STEPS = 200
@@ -25,7 +29,7 @@ STEPS = 200
 def dataset(ray_session, tmp_path_factory) -> Path:
     """200 steps of uniform actions and 200 of an untrained SAC policy under each dynamics."""
     out = tmp_path_factory.mktemp("offline")
-    return offline.collect(
+    return collect(
         ENV, out, STEPS, qualities=("random", "expert"), train_steps=0, log=lambda *_: None
     )
 
@@ -38,7 +42,7 @@ def read_episodes(part: Path) -> list[SingleAgentEpisode]:
 def test_collect_writes_d4rl_layout_manifest_and_no_temp_dirs(dataset):
     assert dataset.name == "hopper"
     manifest = json.loads((dataset / "manifest.json").read_text())
-    assert manifest["format"] == offline.FORMAT and manifest["env"] == ENV
+    assert manifest["format"] == FORMAT and manifest["env"] == ENV
     assert set(manifest["datasets"]) == {"original", "body_mass", "density_10"}
     for dyn, parts in manifest["datasets"].items():
         assert set(parts) == {"random", "expert"}
@@ -53,7 +57,7 @@ def test_collect_writes_d4rl_layout_manifest_and_no_temp_dirs(dataset):
 
 
 def test_parquet_rows_are_complete_rllib_episodes_matching_the_manifest(dataset):
-    manifest = offline.read_manifest(dataset)
+    manifest = read_manifest(dataset)
     stats = manifest["datasets"]["body_mass"]["random"]
     episodes = read_episodes(dataset / "body_mass" / "random")
     assert len(episodes) == stats["num_episodes"]
@@ -66,13 +70,13 @@ def test_parquet_rows_are_complete_rllib_episodes_matching_the_manifest(dataset)
 
 def test_collect_refuses_to_replace_an_existing_task_dir(dataset):
     with pytest.raises(ValueError, match="exists; pass --overwrite"):
-        offline.collect(ENV, dataset.parent, STEPS, qualities=("random",), train_steps=0)
+        collect(ENV, dataset.parent, STEPS, qualities=("random",), train_steps=0)
 
 
 def test_collect_into_a_relative_out_dir(tmp_path, monkeypatch):
     """`make datasets` passes `--out data/offline`; saving the policies needs absolute paths."""
     monkeypatch.chdir(tmp_path)
-    task = offline.collect(
+    task = collect(
         ENV, "data/offline", 50, dynamics=("original",), qualities=("random",), train_steps=0,
         log=lambda *_: None,
     )
@@ -82,33 +86,33 @@ def test_collect_into_a_relative_out_dir(tmp_path, monkeypatch):
 
 def test_bad_dataset_paths_raise_value_errors_naming_path_and_format(dataset, tmp_path):
     missing = tmp_path / "nope"
-    with pytest.raises(ValueError, match=f"{missing}.*does not exist.*offline collect"):
-        offline.load_dataset(missing)
-    with pytest.raises(ValueError, match=f"no manifest.json in {tmp_path}.*offline collect"):
-        offline.load_dataset(tmp_path)
+    with pytest.raises(ValueError, match=f"{missing}.*does not exist.*rllib data collect"):
+        load_dataset(missing)
+    with pytest.raises(ValueError, match=f"no manifest.json in {tmp_path}.*rllib data collect"):
+        load_dataset(tmp_path)
     (tmp_path / "manifest.json").write_text(json.dumps({"format": "d4rl-hdf5"}))
     with pytest.raises(ValueError, match="format 'd4rl-hdf5', expected 'rllib_asor.offline/v1'"):
-        offline.load_dataset(tmp_path)
+        load_dataset(tmp_path)
     with pytest.raises(ValueError, match="dynamics 'mass_x2' not in"):
-        offline.load_dataset(dataset, dynamics="mass_x2")
+        load_dataset(dataset, dynamics="mass_x2")
     with pytest.raises(ValueError, match="quality 'medium' not in .*allowed random \\| expert"):
-        offline.load_dataset(dataset, quality="medium")
+        load_dataset(dataset, quality="medium")
 
 
 def test_load_dataset_selects_parts_from_task_dir_or_part_dir(dataset):
-    whole = offline.load_dataset(dataset, quality="random")
+    whole = load_dataset(dataset, quality="random")
     assert len(whole.paths) == 3 and whole.dynamics == ("original", "body_mass", "density_10")
-    part = offline.load_dataset(dataset / "density_10" / "expert")
+    part = load_dataset(dataset / "density_10" / "expert")
     assert part.dynamics == ("density_10",) and part.qualities == ("expert",)
     assert part.paths == ((dataset / "density_10" / "expert").resolve().as_posix(),)
 
 
 def test_normalized_score_is_0_at_random_and_100_at_expert(dataset):
-    refs = offline.read_manifest(dataset)["reference_returns"]["original"]
-    assert offline.normalized_score(refs["random"], "hopper", dataset) == pytest.approx(0.0)
-    assert offline.normalized_score(refs["expert"], "hopper", dataset) == pytest.approx(100.0)
+    refs = read_manifest(dataset)["reference_returns"]["original"]
+    assert normalized_score(refs["random"], "hopper", dataset) == pytest.approx(0.0)
+    assert normalized_score(refs["expert"], "hopper", dataset) == pytest.approx(100.0)
     with pytest.raises(ValueError, match="not 'walker2d'"):
-        offline.normalized_score(1.0, "walker2d", dataset)
+        normalized_score(1.0, "walker2d", dataset)
 
 
 def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dataset):
@@ -122,7 +126,7 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
         .reporting(min_time_s_per_iteration=0, min_train_timesteps_per_iteration=0)
     )
     # dataset_num_iters_per_learner=1 with num_learners=0 trips RLlib 2.60 (docs/offline.md).
-    offline.offline_input(config, dataset, dataset_num_iters_per_learner=2)
+    offline_input(config, dataset, dataset_num_iters_per_learner=2)
     # A λ schedule over dataset rows trained: 0 for the first minibatch (row 0), 0.1 from row 64.
     algo = rllib_asor.with_asor(
         config, preset="paper", lambda_=[[0, 0.0], [64, 0.1]], seed=0
@@ -176,6 +180,6 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
 
 
 def test_cli_info_on_a_bad_path_exits_2_with_one_line_error(tmp_path, capsys):
-    assert offline.main(["info", str(tmp_path)]) == 2
+    assert rllib_main(["data", "info", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("error: no manifest.json in") and "\n" not in err
+    assert err.startswith("rllib data: error: no manifest.json in") and "\n" not in err
