@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from scipy.stats import trim_mean
 
-from rllib_asor.cli import report
+from rllib_asor.cli import report as cli
+from rllib_asor.report import render, summary
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -55,7 +56,7 @@ def write_trial(
 
 def parse(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="rllib report")
-    report.add_arguments(parser)
+    cli.add_arguments(parser)
     return parser.parse_args(argv)
 
 
@@ -192,7 +193,7 @@ def fixture_results(tmp_path: Path) -> Path:
 
 def test_report_on_real_tune_run_matches_result_json(tune_results: Path, tmp_path: Path) -> None:
     out = tmp_path / "report"
-    md_path = report.make_report(tune_results, out)
+    md_path = render.make_report(tune_results, out)
     assert md_path == out / "report.md"
     md = md_path.read_text()
 
@@ -217,9 +218,9 @@ def test_report_on_real_tune_run_matches_result_json(tune_results: Path, tmp_pat
 
 
 def test_report_default_out_dir_is_inside_results_and_rerun_ignores_it(tune_results: Path) -> None:
-    md = report.make_report(tune_results)
+    md = render.make_report(tune_results)
     assert md == tune_results / "report" / "report.md"
-    again = report.make_report(tune_results)  # the report folder holds no result.json
+    again = render.make_report(tune_results)  # the report folder holds no result.json
     assert "| PPO | 2 |" in again.read_text()
 
 
@@ -227,7 +228,7 @@ def test_report_default_out_dir_is_inside_results_and_rerun_ignores_it(tune_resu
 
 
 def test_methods_grouped_by_asor_mode_algo_and_env(fixture_results: Path, tmp_path: Path) -> None:
-    md = report.make_report(fixture_results, tmp_path / "out").read_text()
+    md = render.make_report(fixture_results, tmp_path / "out").read_text()
     lava = table_rows(md, "LavaWorld-v0")
     assert set(lava) == {"PPO", "PPO+ASOR", "PPO+SRPO", "PPO+ASOR(count)"}
     half = table_rows(md, "HalfCheetahShift-v0")
@@ -241,7 +242,7 @@ def test_methods_grouped_by_asor_mode_algo_and_env(fixture_results: Path, tmp_pa
 
 
 def test_final_mean_std_ci_iqm_match_known_values(fixture_results: Path) -> None:
-    rep = report.summarize(fixture_results)
+    rep = summary.summarize(fixture_results)
     g = {(s.env, s.method): s for s in rep.groups}
     ppo = g[("LavaWorld-v0", "PPO")]
     assert ppo.finals == [10.0, 20.0, 30.0]
@@ -260,7 +261,7 @@ def test_final_mean_std_ci_iqm_match_known_values(fixture_results: Path) -> None
 
 
 def test_table_rows_show_formatted_statistics(fixture_results: Path, tmp_path: Path) -> None:
-    md = report.make_report(fixture_results, tmp_path / "out").read_text()
+    md = render.make_report(fixture_results, tmp_path / "out").read_text()
     ppo = table_rows(md, "LavaWorld-v0")["PPO"]
     assert ppo[2] == "20.00 ± 10.00"
     assert ppo[4] == "20.00"  # IQM
@@ -271,11 +272,11 @@ def test_table_rows_show_formatted_statistics(fixture_results: Path, tmp_path: P
 
 
 def test_race_and_asor_metrics_become_extra_columns(fixture_results: Path, tmp_path: Path) -> None:
-    md = report.make_report(fixture_results, tmp_path / "out").read_text()
+    md = render.make_report(fixture_results, tmp_path / "out").read_text()
     header = next(line for line in md.splitlines() if line.startswith("| method"))
     assert "`env_runners/race/success_rate`" in header
     assert "`learners/__all_modules__/asor/disc_acc`" in header
-    rep = report.summarize(fixture_results)
+    rep = summary.summarize(fixture_results)
     asor = next(g for g in rep.groups if g.method == "PPO+ASOR")
     mean, _ = asor.extra["env_runners/race/success_rate"]
     assert mean == pytest.approx(np.mean([0.0, 0.1, 0.2, 0.3, 0.4]))
@@ -285,7 +286,7 @@ def test_race_and_asor_metrics_become_extra_columns(fixture_results: Path, tmp_p
 
 
 def test_columns_option_selects_extra_columns(fixture_results: Path) -> None:
-    rep = report.summarize(fixture_results, columns=["time_this_iter_s"])
+    rep = summary.summarize(fixture_results, columns=["time_this_iter_s"])
     assert rep.columns == ["time_this_iter_s"]
     assert rep.groups[0].extra["time_this_iter_s"][0] == pytest.approx(0.5)
     args = parse([str(fixture_results), "--columns", "a/b,c", "--columns", "d"])
@@ -295,19 +296,19 @@ def test_columns_option_selects_extra_columns(fixture_results: Path) -> None:
 def test_default_columns_are_race_and_headline_asor_metrics_all_shows_every_one(
     fixture_results: Path,
 ) -> None:
-    default = report.summarize(fixture_results).columns
+    default = summary.summarize(fixture_results).columns
     assert default == ["env_runners/race/success_rate", "learners/__all_modules__/asor/disc_acc"]
-    assert report.summarize(fixture_results, columns=["all"]).columns == ["asor/rnd_loss", *default]
+    assert summary.summarize(fixture_results, columns=["all"]).columns == ["asor/rnd_loss", *default]
 
 
 def test_last_n_averages_the_last_iterations(fixture_results: Path) -> None:
-    rep = report.summarize(fixture_results, last_n=2)
+    rep = summary.summarize(fixture_results, last_n=2)
     ppo = next(g for g in rep.groups if g.method == "PPO" and g.env == "LavaWorld-v0")
     assert ppo.finals == [7.5, 15.0, 22.5]
 
 
 def test_group_by_dotted_param_key(fixture_results: Path) -> None:
-    rep = report.summarize(fixture_results, group_by="asor.lambda_")
+    rep = summary.summarize(fixture_results, group_by="asor.lambda_")
     methods = {(g.env, g.method): g.n for g in rep.groups}
     assert methods[("LavaWorld-v0", "asor.lambda_=0.1")] == 3
     assert methods[("LavaWorld-v0", "asor.lambda_=0.2")] == 2
@@ -316,7 +317,7 @@ def test_group_by_dotted_param_key(fixture_results: Path) -> None:
 
 def test_curves_png_per_env_and_no_temp_files_left(fixture_results: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
-    md = report.make_report(fixture_results, out).read_text()
+    md = render.make_report(fixture_results, out).read_text()
     for env in ("LavaWorld-v0", "HalfCheetahShift-v0"):
         assert_png(out / f"curves_{env}.png")
         assert f"](curves_{env}.png)" in md
@@ -342,7 +343,7 @@ def test_restored_trial_keeps_last_report_and_skips_broken_line(tmp_path: Path) 
             + "\n"
         )
         f.write('{"env_runners": {"episode_ret')
-    rep = report.summarize(tmp_path)
+    rep = summary.summarize(tmp_path)
     (trial,) = rep.trials
     assert len(trial.rows) == 3
     assert rep.groups[0].finals == [9.0]
@@ -360,7 +361,7 @@ def test_missing_x_falls_back_to_training_iteration(tmp_path: Path) -> None:
             for i in (1, 2)
         )
     )
-    rep = report.summarize(tmp_path)
+    rep = summary.summarize(tmp_path)
     assert rep.x == "training_iteration"
     assert any("training_iteration" in n for n in rep.notes)
     assert rep.groups[0].env_steps == 2.0
@@ -373,14 +374,14 @@ def test_bad_inputs_raise_value_error_with_clear_message(
     tmp_path: Path, fixture_results: Path
 ) -> None:
     with pytest.raises(ValueError, match="does not exist"):
-        report.make_report(tmp_path / "nope")
+        render.make_report(tmp_path / "nope")
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match="no trial results"):
-        report.make_report(tmp_path / "empty")
+        render.make_report(tmp_path / "empty")
     with pytest.raises(
         ValueError, match="episode_return_meen.*similar keys: env_runners/episode_return_mean"
     ):
-        report.make_report(fixture_results, metric="env_runners/episode_return_meen")
+        render.make_report(fixture_results, metric="env_runners/episode_return_meen")
 
 
 @pytest.mark.parametrize("case", ["missing", "empty", "bad-metric"])
@@ -393,7 +394,7 @@ def test_cli_exits_2_with_one_line_for_bad_input(
         "empty": [str(tmp_path / "empty")],
         "bad-metric": [str(fixture_results), "--metric", "no/such/key"],
     }[case]
-    assert report.run(parse(argv)) == 2
+    assert cli.run(parse(argv)) == 2
     err = capsys.readouterr().err
     assert err.startswith("rllib report: error: ") and err.count("\n") == 1
     assert "Traceback" not in err
@@ -404,8 +405,8 @@ def test_cli_success_writes_report_and_prints_path(
 ) -> None:
     out = tmp_path / "rep"
     args = parse([str(fixture_results), "--out", str(out), "--last-n", "2"])
-    assert (args.metric, args.x) == (report.DEFAULT_METRIC, report.DEFAULT_X)
-    assert report.run(args) == 0
+    assert (args.metric, args.x) == (summary.DEFAULT_METRIC, summary.DEFAULT_X)
+    assert cli.run(args) == 0
     assert capsys.readouterr().out.strip() == str(out / "report.md")
     assert "last 2 iteration(s)" in (out / "report.md").read_text()
 
@@ -416,7 +417,7 @@ def test_headline_columns_show_each_metric_once_without_per_map_copies() -> None
         "env_runners/race/map_7/success_rate", "race/trapped_rate", "race/curriculum_stage",
         "asor/disc_acc", "asor/rnd_loss", "asor/p0/disc_acc", "asor/bonus_share",
     ]
-    assert report.headline_columns(keys) == [
+    assert summary.headline_columns(keys) == [
         "asor/bonus_share", "asor/disc_acc", "race/success_rate", "race/trapped_rate",
     ]
 
@@ -426,10 +427,9 @@ def test_one_bootstrap_ci_for_reports_and_benchmarks() -> None:
     import numpy as np
 
     import benchmarks.lava_reproduction as lava
-    import rllib_asor.cli.report as report
     from rllib_asor.report.stats import bootstrap_ci
 
-    assert report.bootstrap_ci is bootstrap_ci and lava.bootstrap_ci is bootstrap_ci
+    assert summary.bootstrap_ci is bootstrap_ci and lava.bootstrap_ci is bootstrap_ci
     lo, hi = bootstrap_ci([0.1, 0.5, 0.7, 0.2, 0.9])
     assert lo < float(np.mean([0.1, 0.5, 0.7, 0.2, 0.9])) < hi
     assert (lo, hi) == bootstrap_ci([0.1, 0.5, 0.7, 0.2, 0.9])  # seeded: reproducible

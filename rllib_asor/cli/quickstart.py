@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     max_steps = TEST_EPISODE_STEPS if args.test else _episode_steps(exp)
     print(f"rllib quickstart: evaluating on {args.episodes} unseen courses per map ...", flush=True)
     files, evaluation = _evaluate_and_record(result.checkpoint.path, out, args.episodes, max_steps)
-    from rllib_asor.cli.report import make_report
+    from rllib_asor.report.render import make_report
 
     report = make_report(Path(out).parent, out, last_n=REPORT_LAST_N)
     with report.open("a", encoding="utf-8") as f:  # the number that matters, in the report too
