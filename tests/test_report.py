@@ -241,6 +241,26 @@ def test_methods_grouped_by_asor_mode_algo_and_env(fixture_results: Path, tmp_pa
     ]
 
 
+def test_algorithm_comes_from_the_run_rllib_train_records_not_the_folder_names(
+    tmp_path: Path,
+) -> None:
+    """`rllib train` writes the experiment's `run` into every trial's params; it wins over the
+    folder names (here misleading), which are only a fallback for other results."""
+    from rllib_asor.report.results import RUN_KEY
+
+    params = {"env": "LavaWorld-v0", RUN_KEY: "SAC", "asor": {"mode": "asor"}}
+    write_trial(tmp_path, "ppo-sweep", "PPO_LavaWorld-v0_fffff_00000_0", params, [1.0, 2.0])
+    write_trial(
+        tmp_path,
+        "ppo-sweep",
+        "APPO_LavaWorld-v0_fffff_00001_1",
+        {**params, RUN_KEY: "DQN", "asor": None},
+        [3.0],
+    )
+    rep = summary.summarize(tmp_path)
+    assert sorted(t.method for t in rep.trials) == ["DQN", "SAC+ASOR"]
+
+
 def test_final_mean_std_ci_iqm_match_known_values(fixture_results: Path) -> None:
     rep = summary.summarize(fixture_results)
     g = {(s.env, s.method): s for s in rep.groups}

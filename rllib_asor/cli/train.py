@@ -9,6 +9,7 @@ from typing import Any
 
 from rllib_asor.cli import experiment as E
 from rllib_asor.cli.errors import UsageError
+from rllib_asor.report.results import RUN_KEY
 
 DEFAULT_STORAGE = "~/ray_results"
 
@@ -168,6 +169,7 @@ def _fit(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
     envs.register_with_tune(exp.env)
     trainable = _trainable(exp)
     space = E.param_space(exp, algo_config)
+    space[RUN_KEY] = exp.run  # the method label of `rllib report` (rllib_asor.report.results)
     root = storage_path(args, exp)
     print(
         f"rllib: {exp.name}: {exp.run} on {exp.env}, {exp.num_trials} trial(s), "
