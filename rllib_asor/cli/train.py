@@ -177,13 +177,15 @@ def _fit(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
         flush=True,
     )
     if args.resume:
-        tuner = tune.Tuner.restore(
-            os.path.join(root, exp.name),
-            trainable=trainable,
-            param_space=space,
-            resume_unfinished=True,
-            resume_errored=True,
-        )
+        restore = dict(trainable=trainable, resume_unfinished=True, resume_errored=True)
+        path = os.path.join(root, exp.name)
+        try:
+            tuner = tune.Tuner.restore(path, param_space=space, **restore)
+        except ValueError as e:  # Tune wants the original keys: a run from before RUN_KEY
+            if "param_space" not in str(e):
+                raise
+            del space[RUN_KEY]
+            tuner = tune.Tuner.restore(path, param_space=space, **restore)
     else:
         run_config = tune.RunConfig(
             name=exp.name,
