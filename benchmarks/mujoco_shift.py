@@ -160,43 +160,19 @@ def obs_filter(algo: Any) -> Any:
     return lambda obs: obs
 
 
-def deterministic_action(module: Any, obs: np.ndarray) -> np.ndarray:
-    """The policy's deterministic action (SAC: squashed mean; PPO: Gaussian mean)."""
-    import torch
-    from ray.rllib.core import Columns
-
-    with torch.no_grad():
-        out = module.forward_inference(
-            {Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None]}
-        )
-        dist = module.get_inference_action_dist_cls().from_logits(out[Columns.ACTION_DIST_INPUTS])
-        return dist.to_deterministic().sample()[0].numpy()
-
-
 def evaluate(
     module: Any, task: str, episodes: int, seed: int = 1000, obs_fn: Any = None
 ) -> dict[str, dict[str, float]]:
     """Mean return and length of the deterministic policy under each fixed dynamics (actions
     clipped to the action space, as RLlib's env runner does; `obs_fn` normalises obs)."""
-    import gymnasium as gym
-
-    import rllib_asor.envs  # noqa: F401
+    from rllib_asor.evaluation.rollout import rollout
 
     out = {}
     for dyn in EVAL_DYNAMICS:
-        env = gym.make(f"rllib_asor/{task}Shift-v0", dynamics=dyn)
-        rets, lens = [], []
-        for ep in range(episodes):
-            obs, _ = env.reset(seed=seed + ep)
-            done, ret, n = False, 0.0, 0
-            while not done:
-                act = deterministic_action(module, obs if obs_fn is None else obs_fn(obs))
-                act = np.clip(act, env.action_space.low, env.action_space.high)
-                obs, r, term, trunc, _ = env.step(act)
-                ret, n, done = ret + float(r), n + 1, term or trunc
-            rets.append(ret)
-            lens.append(n)
-        env.close()
+        rets, lens = rollout(
+            module, f"rllib_asor/{task}Shift-v0", episodes, seed=seed,
+            env_kwargs={"dynamics": dyn}, obs_fn=obs_fn,
+        )  # fmt: skip
         out[dyn] = {"return": float(np.mean(rets)), "length": float(np.mean(lens))}
     return out
 

@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import start_local_ray
-from benchmarks.mujoco_shift import deterministic_action, train
+from benchmarks.mujoco_shift import train
+from rllib_asor.evaluation.rollout import deterministic_action
 
 ASOR = {
     "preset": "paper",  # the form these results were measured with

@@ -72,36 +72,13 @@ def policy_module(algo_or_path: Any) -> Any:
 def rollout_returns(
     module: Any, env_id: str, dynamics: str, episodes: int, seed: int = 0
 ) -> list[float]:
-    """Undiscounted returns of `episodes` deterministic episodes of `module` on the env."""
-    import gymnasium as gym
-    import torch
-    from ray.rllib.core.columns import Columns
+    """Undiscounted returns of `episodes` deterministic episodes of `module` on the env
+    (SAC/CQL squash into [-1, 1]: actions are unsquashed onto the env's bounds)."""
+    from rllib_asor.evaluation.rollout import rollout, unsquash
 
-    import rllib_asor.envs  # noqa: F401
-
-    env = gym.make(env_id, dynamics=dynamics)
-    low, high = env.action_space.low, env.action_space.high
-    dist_cls = module.get_inference_action_dist_cls()
-    returns = []
-    try:
-        for i in range(episodes):
-            obs, _ = env.reset(seed=seed + i)
-            done, total = False, 0.0
-            while not done:
-                with torch.no_grad():
-                    out = module.forward_inference(
-                        {Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None]}
-                    )
-                    dist = dist_cls.from_logits(out[Columns.ACTION_DIST_INPUTS])
-                    a = dist.to_deterministic().sample()[0].numpy()
-                # SAC/CQL squash into [-1, 1]; map onto the env's bounds (RLlib's unsquash).
-                a = np.clip(low + (a + 1.0) * (high - low) / 2.0, low, high)
-                obs, r, term, trunc, _ = env.step(a)
-                total += float(r)
-                done = term or trunc
-            returns.append(total)
-    finally:
-        env.close()
+    returns, _ = rollout(
+        module, env_id, episodes, seed=seed, env_kwargs={"dynamics": dynamics}, action_fn=unsquash
+    )
     return returns
 
 
