@@ -21,7 +21,7 @@ Runners (`--runners`):
 Stable-Baselines3 is a benchmark-only dependency (`pip install -e ".[bench]"`, which keeps torch
 pinned; it is never needed by `make test`). Run:
 
-    nice -n 5 .venv/bin/python -m benchmarks.sac_speed --rounds 3 --block 512 \
+    nice -n 5 .venv/bin/python -m benchmarks.sac_speed --rounds 8 --block 256 --stock-block 128 \
         --out benchmarks/out/sac_speed
 
 `--cql-updates N --runners none` times CQL Learner steps instead (stock vs fast critics, with
@@ -29,8 +29,11 @@ and without ASOR; random Hopper-shaped batches, no dataset needed):
 
     nice -n 5 .venv/bin/python -m benchmarks.sac_speed --cql-updates 100 --runners none
 
-It writes OUT/sac_speed.json (env steps/s per runner and round, ratios to SB3 and to RLlib
-stock) and prints a markdown table. `--profile RUNNER` instead trains RUNNER alone for
+Rates are steps/s summed over rounds; on a shared machine the load drifts between rounds, so
+the JSON and table also give, per runner, the median over rounds of its rate ÷ SB3's rate in the
+same round. The slow `*_stock` runners take `--stock-block` steps per round (fewer, so that
+the rounds stay short). It writes OUT/sac_speed.json (env steps/s per runner and round, ratios
+to SB3 and to RLlib stock) and prints a markdown table. `--profile RUNNER` instead trains RUNNER alone for
 `--block` steps after its warm-up under cProfile and prints where the time went.
 """
 
@@ -172,7 +175,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         for name, runner in runners.items():
             before = runner.steps
             t0 = time.perf_counter()
-            runner.run(args.block)
+            runner.run(args.stock_block if name.endswith("_stock") else args.block)
             wall = time.perf_counter() - t0
             done = runner.steps - before
             rounds[name].append({"steps": done, "wall_s": wall, "steps_per_s": done / wall})
@@ -182,15 +185,29 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     rates = {
         n: sum(x["steps"] for x in rs) / sum(x["wall_s"] for x in rs) for n, rs in rounds.items()
     }
-    ratios = {}
+    ratios, paired = {}, {}
     for base in ("sb3", "rllib_stock"):
         if base in rates:
             ratios[f"vs_{base}"] = {n: v / rates[base] for n, v in rates.items()}
+            # per round, each runner against the base's block of the same round (load drifts
+            # between rounds; the median of these paired ratios is less sensitive to it)
+            paired[f"vs_{base}"] = {
+                n: float(
+                    np.median(
+                        [
+                            x["steps_per_s"] / b["steps_per_s"]
+                            for x, b in zip(rs, rounds[base], strict=True)
+                        ]
+                    )
+                )
+                for n, rs in rounds.items()
+            }
     return {
         "env": ENV_ID,
         "settings": {
             "warmup": args.warmup,
             "block": args.block,
+            "stock_block": args.stock_block,
             "rounds": args.rounds,
             "seed": args.seed,
             "batch": 256,
@@ -201,6 +218,8 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "env_steps_per_s": rates,
         "per_round": rounds,
         "ratios": ratios,
+        "median_paired_ratios": paired,
+        "load_avg_after": os.getloadavg(),
         "versions": _versions(),
     }
 
@@ -223,15 +242,18 @@ def table(res: dict[str, Any]) -> str:
     rates = res["env_steps_per_s"]
     sb3 = rates.get("sb3")
     stock = rates.get("rllib_stock")
+    paired = res.get("median_paired_ratios", {}).get("vs_sb3", {})
     lines = [
-        "| runner | env steps/s while learning | per round | ÷ SB3 | ÷ RLlib stock |",
-        "|---|---|---|---|---|",
+        "| runner | env steps/s while learning | per round | ÷ SB3 | ÷ SB3, median of rounds "
+        "| ÷ RLlib stock |",
+        "|---|---|---|---|---|---|",
     ]
     for name, rate in rates.items():
         per = ", ".join(f"{x['steps_per_s']:.1f}" for x in res["per_round"][name])
         vs_sb3 = f"{rate / sb3:.2f}" if sb3 else "–"
+        med = f"{paired[name]:.2f}" if name in paired else "–"
         vs_stock = f"{rate / stock:.2f}" if stock else "–"
-        lines.append(f"| {LABELS[name]} | {rate:.1f} | {per} | {vs_sb3} | {vs_stock} |")
+        lines.append(f"| {LABELS[name]} | {rate:.1f} | {per} | {vs_sb3} | {med} | {vs_stock} |")
     return "\n".join(lines) + "\n"
 
 
@@ -328,8 +350,11 @@ def main(argv: list[str] | None = None) -> None:
     )
     p.add_argument("--runners", nargs="+", choices=[*RUNNERS, "none"], default=list(RUNNERS))
     p.add_argument("--warmup", type=int, default=1000, help="env steps before learning")
-    p.add_argument("--block", type=int, default=512, help="env steps per runner and round")
-    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--block", type=int, default=256, help="env steps per runner and round")
+    p.add_argument(
+        "--stock-block", type=int, default=128, help="env steps per round of the *_stock runners"
+    )
+    p.add_argument("--rounds", type=int, default=8)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="benchmarks/out/sac_speed")
     p.add_argument("--profile", choices=RUNNERS, default=None)
