@@ -315,3 +315,18 @@ def test_fast_path_with_concat_critics_learns_pendulum_at_least_as_well(ray_sess
     assert np.mean(fast) > -500
     spread = np.sqrt((np.var(stock, ddof=1) + np.var(fast, ddof=1)) / 2)
     assert np.mean(fast) > np.mean(stock) - (2 * spread + 100)
+
+
+def test_fast_sac_asor_trains_on_a_remote_learner(ray_session):
+    """FlatTransitions travel to a Learner actor (num_learners=1) like episodes do.
+    (2 DDP Learners with ASOR fail on RLlib's stock path as well: docs/results.md, issue 11.)"""
+    config = rllib_asor.with_asor(_sac().learners(num_learners=1, num_cpus_per_learner=0.5))
+    algo = config.build_algo()
+    try:
+        assert type(algo.local_replay_buffer) is FlatReplayBuffer
+        for _ in range(3):
+            result = algo.train()
+        assert np.isfinite(result["asor"]["disc_loss"])
+        assert np.isfinite(result["learners"]["default_policy"]["qf_loss"])
+    finally:
+        algo.stop()
