@@ -43,3 +43,23 @@ def test_example_parses_and_validates(path, monkeypatch):
             continue
         config = E.validate(exp)
         assert config.env == exp.env
+
+
+def test_plain_sac_and_cql_files_get_the_fast_off_policy_path(tmp_path):
+    """`rllib train file sac-hopper.yaml` gets the fast path (issue 11) without ASOR; a file can
+    opt out with `learner_config_dict: {fast_off_policy: false}`."""
+    from rllib_asor.rllib.learners import FastSACTorchLearner
+
+    [exp] = E.load_file(str(REPO / "tuned_examples/mujoco/sac-hopper.yaml"))
+    config = E.validate(exp)
+    assert config.learner_class is FastSACTorchLearner
+    assert config.replay_buffer_config["storage"] == "flat"
+    text = (REPO / "tuned_examples/mujoco/sac-hopper.yaml").read_text()
+    path = tmp_path / "optout.yaml"
+    path.write_text(
+        text.replace(
+            "  config:\n", "  config:\n    learner_config_dict: {fast_off_policy: false}\n", 1
+        )
+    )
+    [exp] = E.load_file(str(path))
+    assert E.validate(exp).learner_class is not FastSACTorchLearner
