@@ -107,7 +107,7 @@ def test_two_iterations_train_aux_modules_and_report_metrics(algo):
         "js_estimate",
     ):
         assert np.isfinite(asor[key]), key
-    assert asor["aug_reward_max"] <= 0.0 and asor["lambda"] == 0.1
+    assert asor["lambda"] == 0.1  # the setting reached the connector (paper preset: absolute λ)
 
 
 def test_checkpoint_restores_aux_weights_and_normaliser(algo, tmp_path):
