@@ -7,7 +7,7 @@ import os
 import sys
 from typing import Any
 
-from rllib_asor.cli import experiment as E
+from rllib_asor.cli import experiment
 from rllib_asor.cli.errors import UsageError
 from rllib_asor.report.results import RUN_KEY
 
@@ -48,11 +48,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--keep-checkpoints",
         type=int,
-        help=f"checkpoints to keep per trial (default {E.DEFAULT_NUM_TO_KEEP})",
+        help=f"checkpoints to keep per trial (default {experiment.DEFAULT_NUM_TO_KEEP})",
     )
 
 
-def load_experiments(args: argparse.Namespace) -> list[E.Experiment]:
+def load_experiments(args: argparse.Namespace) -> list[experiment.Experiment]:
     """Experiments from `file PATH` / `-f PATH` or from `--run/--env/--config`."""
     path = args.config_file
     if args.source:
@@ -69,7 +69,7 @@ def load_experiments(args: argparse.Namespace) -> list[E.Experiment]:
     if path:
         if args.run or args.env or args.config:
             raise UsageError("give either 'file PATH' or --run/--env/--config, not both")
-        exps = E.load_file(path)
+        exps = experiment.load_file(path)
         if args.name and len(exps) == 1:
             exps[0].name = args.name
         return exps
@@ -77,19 +77,19 @@ def load_experiments(args: argparse.Namespace) -> list[E.Experiment]:
         raise UsageError(
             "missing input: allowed 'file PATH' or --run ALGO --env ID [--config JSON]"
         )
-    return [E.from_flags(args.run, args.env, args.config, args.name)]
+    return [experiment.from_flags(args.run, args.env, args.config, args.name)]
 
 
-def storage_path(args: argparse.Namespace, exp: E.Experiment) -> str:
+def storage_path(args: argparse.Namespace, exp: experiment.Experiment) -> str:
     path = args.storage_path or exp.storage_path or DEFAULT_STORAGE
     if "://" in path:
         return path
     return os.path.abspath(os.path.expanduser(path))
 
 
-def _trainable(exp: E.Experiment) -> Any:
+def _trainable(exp: experiment.Experiment) -> Any:
     if exp.asor is None:
-        return E.algorithm_class(exp)
+        return experiment.algorithm_class(exp)
     from rllib_asor.rllib.trainable import asor_trainable
 
     return asor_trainable(exp.run)
@@ -101,14 +101,14 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def train(args: argparse.Namespace) -> list[tuple[E.Experiment, Any]]:
+def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
     """Validate every experiment (UsageError on bad input), run each with Tune and stop the
     Ray this call started (so no worker output follows); each experiment's ResultGrid."""
-    stop = E.parse_stop_flags(args.stop)
+    stop = experiment.parse_stop_flags(args.stop)
     exps = load_experiments(args)
     configs = []
     for exp in exps:
-        E.apply_overrides(
+        experiment.apply_overrides(
             exp,
             test=args.test,
             num_env_runners=args.num_env_runners,
@@ -116,7 +116,7 @@ def train(args: argparse.Namespace) -> list[tuple[E.Experiment, Any]]:
             checkpoint_freq=args.checkpoint_freq,
             keep_checkpoints=args.keep_checkpoints,
         )
-        configs.append(E.validate(exp))
+        configs.append(experiment.validate(exp))
         if args.resume:
             _check_resumable(os.path.join(storage_path(args, exp), exp.name))
     from rllib_asor.cli.cluster import probe, start_ray
@@ -128,7 +128,7 @@ def train(args: argparse.Namespace) -> list[tuple[E.Experiment, Any]]:
             print(f"rllib: warning: {warning}", file=sys.stderr)
     # Tune's CLIReporter (our live table) is used only with the old output engine.
     os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
-    started = start_ray(args.address, max(E.required_cpus(c) for c in configs))
+    started = start_ray(args.address, max(experiment.required_cpus(c) for c in configs))
     try:
         return [(exp, _fit(exp, cfg, args)) for exp, cfg in zip(exps, configs, strict=True)]
     finally:
@@ -144,10 +144,10 @@ def _max_concurrent(algo_config: Any) -> int | None:
     wait forever). None (Tune's rule) otherwise."""
     import ray
 
-    if not E.offline_data_cpus(algo_config):
+    if not experiment.offline_data_cpus(algo_config):
         return None
     cpus = float(ray.cluster_resources().get("CPU", 1.0))
-    return max(1, int(cpus // E.required_cpus(algo_config)))
+    return max(1, int(cpus // experiment.required_cpus(algo_config)))
 
 
 def _check_resumable(path: str) -> None:
@@ -159,7 +159,7 @@ def _check_resumable(path: str) -> None:
         )
 
 
-def _fit(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
+def _fit(exp: experiment.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
     """Run one experiment with Tune; its ResultGrid."""
     from ray import tune
 
@@ -168,7 +168,7 @@ def _fit(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
 
     envs.register_with_tune(exp.env)
     trainable = _trainable(exp)
-    space = E.param_space(exp, algo_config)
+    space = experiment.param_space(exp, algo_config)
     space[RUN_KEY] = exp.run  # the method label of `rllib report` (rllib_asor.report.results)
     root = storage_path(args, exp)
     print(
@@ -191,7 +191,7 @@ def _fit(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
             name=exp.name,
             storage_path=root,
             stop=exp.stop or None,
-            checkpoint_config=tune.CheckpointConfig(**E.checkpoint_kwargs(exp)),
+            checkpoint_config=tune.CheckpointConfig(**experiment.checkpoint_kwargs(exp)),
             progress_reporter=LineReporter(exp.stop),
             verbose=1,
         )
@@ -206,7 +206,7 @@ def _fit(exp: E.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
     return tuner.fit()
 
 
-def print_summary(exp: E.Experiment, results: Any) -> int:
+def print_summary(exp: experiment.Experiment, results: Any) -> int:
     """One line per trial; the number of errored or unfinished trials."""
     print(f"rllib: {exp.name}: {len(results)} trial(s), {len(results.errors)} errored")
     for result in results:

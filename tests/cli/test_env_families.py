@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from rllib_asor.cli import experiment as E
+from rllib_asor.cli import experiment
 from rllib_asor.cli.errors import UsageError
 from rllib_asor.rllib.env_families import RACE, family_of
 
@@ -23,12 +23,12 @@ def test_race_from_flags_gets_the_family_defaults():
     from rllib_asor.models.race_net import RaceNetModule
     from rllib_asor.rllib.race import RaceMetricsCallback
 
-    exp = E.from_flags("PPO", "game_env/ObstacleRace-v0", None, None)
-    E.apply_overrides(exp, test=True)
+    exp = experiment.from_flags("PPO", "game_env/ObstacleRace-v0", None, None)
+    experiment.apply_overrides(exp, test=True)
     assert (
         exp.config["env_config"]["max_episode_steps"] == RACE.test_env_config["max_episode_steps"]
     )
-    config = E.validate(exp)
+    config = experiment.validate(exp)
     assert config.rl_module_spec.module_class is RaceNetModule
     assert config.callbacks_class is RaceMetricsCallback
 
@@ -39,4 +39,4 @@ def test_curriculum_outside_a_family_that_has_one_names_the_allowed_envs(tmp_pat
         "x:\n  env: CartPole-v1\n  run: PPO\n  config: {curriculum: {stages: [[0], random]}}\n"
     )
     with pytest.raises(UsageError, match=r"curriculum.*allowed envs: game_env/\.\.\..*CartPole-v1"):
-        E.validate(E.load_file(str(path))[0])
+        experiment.validate(experiment.load_file(str(path))[0])

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from rllib_asor.cli import experiment as E
+from rllib_asor.cli import experiment
 from rllib_asor.cli.errors import UsageError
 from rllib_asor.cli.main import main
 
@@ -26,8 +26,8 @@ cartpole-legacy:
 
 
 def test_legacy_config_keys_are_translated_to_new_stack_values(write_yaml):
-    [exp] = E.load_file(write_yaml(LEGACY))
-    cfg = E.validate(exp)
+    [exp] = experiment.load_file(write_yaml(LEGACY))
+    cfg = experiment.validate(exp)
     assert cfg.num_env_runners == 1
     assert cfg.num_epochs == 4
     assert cfg.minibatch_size == 64
@@ -39,7 +39,7 @@ def test_legacy_config_keys_are_translated_to_new_stack_values(write_yaml):
 
 
 def test_legacy_stop_keys_are_translated_and_training_iteration_kept(write_yaml):
-    [exp] = E.load_file(write_yaml(LEGACY))
+    [exp] = experiment.load_file(write_yaml(LEGACY))
     assert exp.stop == {
         "env_runners/episode_return_mean": 150,
         "num_env_steps_sampled_lifetime": 100000,
@@ -49,7 +49,7 @@ def test_legacy_stop_keys_are_translated_and_training_iteration_kept(write_yaml)
 
 def test_legacy_keys_produce_one_warning_each(write_yaml):
     path = write_yaml(LEGACY)
-    [exp] = E.load_file(path)
+    [exp] = experiment.load_file(path)
     text = "\n".join(exp.warnings)
     for old, new in [
         ("num_workers", "num_env_runners"),
@@ -79,7 +79,7 @@ def test_framework_tf_is_refused_with_torch_only_message(write_yaml):
     with pytest.raises(
         UsageError, match=r"x\.config\.framework: framework 'tf2' is not supported: allowed 'torch'"
     ):
-        E.load_file(path)
+        experiment.load_file(path)
 
 
 def test_legacy_model_key_outside_default_model_config_is_refused(write_yaml):
@@ -90,12 +90,12 @@ def test_legacy_model_key_outside_default_model_config_is_refused(write_yaml):
         UsageError,
         match=r"x\.config\.model\.use_attention: unknown model setting; allowed: .*fcnet_hiddens",
     ):
-        E.load_file(path)
+        experiment.load_file(path)
 
 
 def test_flags_build_the_same_experiment_as_yaml(write_yaml):
-    flags = E.from_flags("PPO", "CartPole-v1", '{"num_workers": 1, "lr": 0.001}')
-    [yaml_exp] = E.load_file(
+    flags = experiment.from_flags("PPO", "CartPole-v1", '{"num_workers": 1, "lr": 0.001}')
+    [yaml_exp] = experiment.load_file(
         write_yaml("y:\n  env: CartPole-v1\n  run: PPO\n  config: {num_workers: 1, lr: 0.001}\n")
     )
     assert flags.config == yaml_exp.config == {"num_env_runners": 1, "lr": 0.001}
@@ -103,7 +103,7 @@ def test_flags_build_the_same_experiment_as_yaml(write_yaml):
 
 
 def test_rl_module_block_selects_a_registered_module_class(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml("""
         x:
           env: CartPole-v1
@@ -113,14 +113,16 @@ def test_rl_module_block_selects_a_registered_module_class(write_yaml):
             model_config: {vf_hiddens: [32]}
     """)
     )
-    cfg = E.validate(exp)
+    cfg = experiment.validate(exp)
     assert cfg._rl_module_spec.module_class.__name__ == "RaceNetModule"
     assert cfg.model_config["pi_hiddens"] == [64] and cfg.model_config["vf_hiddens"] == [32]
-    assert E.param_space(exp, cfg)["_rl_module_spec"].module_class.__name__ == "RaceNetModule"
+    assert (
+        experiment.param_space(exp, cfg)["_rl_module_spec"].module_class.__name__ == "RaceNetModule"
+    )
 
 
 def test_legacy_custom_model_becomes_rl_module_block(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml("""
         x:
           env: CartPole-v1
@@ -136,7 +138,7 @@ def test_legacy_custom_model_becomes_rl_module_block(write_yaml):
 
 
 def test_unknown_module_class_is_refused(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml(
             "x:\n  env: CartPole-v1\n  run: PPO\n  config: {rl_module: {module_class: nope_net}}\n"
         )
@@ -144,4 +146,4 @@ def test_unknown_module_class_is_refused(write_yaml):
     with pytest.raises(
         UsageError, match=r"x\.config\.rl_module\.module_class: .*allowed one of \['race_net'\]"
     ):
-        E.validate(exp)
+        experiment.validate(exp)

@@ -1,6 +1,6 @@
 """The YAML `multi_agent:` block (shared policy) and the race envs/callbacks through the CLI.
 
-Validation only (no Ray, no training): `E.validate` builds the env once and runs RLlib's
+Validation only (no Ray, no training): `experiment.validate` builds the env once and runs RLlib's
 `AlgorithmConfig.validate()`.
 """
 
@@ -10,8 +10,7 @@ import pickle
 
 import pytest
 
-from rllib_asor.cli import experiment as E
-from rllib_asor.cli import multi_agent
+from rllib_asor.cli import experiment, multi_agent
 from rllib_asor.cli.errors import UsageError
 from rllib_asor.rllib import env_registration as envs
 from rllib_asor.rllib.env_families import RACE
@@ -28,16 +27,16 @@ x:
 
 
 def test_shared_policy_block_maps_every_racer_to_one_policy(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml(MULTI.format(block="{policies: [shared], policy_mapping_fn: shared}"))
     )
-    cfg = E.validate(exp)
+    cfg = experiment.validate(exp)
     assert cfg.is_multi_agent and set(cfg.policies) == {"shared"}
     assert {cfg.policy_mapping_fn(f"racer_{i}", None) for i in range(4)} == {"shared"}
     # The Tune param space round-trips to a multi-agent config (what each trial rebuilds).
     from ray.rllib.algorithms.ppo import PPOConfig
 
-    space = E.param_space(exp, cfg)
+    space = experiment.param_space(exp, cfg)
     again = PPOConfig().update_from_dict(space)
     assert again.is_multi_agent and set(again.policies) == {"shared"}
     assert again.policy_mapping_fn("racer_1", None) == "shared"
@@ -84,24 +83,24 @@ def test_mapping_fn_may_be_a_function_path():
     ],
 )
 def test_bad_multi_agent_block_is_refused_naming_the_key(write_yaml, block, fragment):
-    [exp] = E.load_file(write_yaml(MULTI.format(block=block)))
+    [exp] = experiment.load_file(write_yaml(MULTI.format(block=block)))
     with pytest.raises(UsageError, match=r"x\.config\.multi_agent") as err:
-        E.validate(exp)
+        experiment.validate(exp)
     assert fragment in str(err.value)
 
 
 def test_race_envs_are_known_to_the_cli_with_race_callbacks(write_yaml):
     assert envs.env_exists("game_env/ObstacleRaceMulti-v0")
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml("x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  config: {}\n")
     )
     from rllib_asor.rllib.race import RaceMetricsCallback
 
-    assert E.validate(exp).callbacks_class is RaceMetricsCallback
+    assert experiment.validate(exp).callbacks_class is RaceMetricsCallback
 
 
 def test_race_callbacks_are_not_forced_over_the_files_own(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml(
             "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n"
             "  config: {callbacks: ray.rllib.callbacks.callbacks.RLlibCallback}\n"
@@ -109,7 +108,7 @@ def test_race_callbacks_are_not_forced_over_the_files_own(write_yaml):
     )
     from ray.rllib.callbacks.callbacks import RLlibCallback
 
-    assert E.validate(exp).callbacks_class is RLlibCallback
+    assert experiment.validate(exp).callbacks_class is RLlibCallback
 
 
 def test_single_race_env_gets_max_episode_steps_in_its_constructor():
@@ -124,23 +123,29 @@ def test_single_race_env_gets_max_episode_steps_in_its_constructor():
 
 
 def test_bad_race_env_config_is_refused_before_ray(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml(
             "x:\n  env: game_env/ObstacleRaceMulti-v0\n  run: PPO\n"
             "  config: {env_config: {num_racers: 0}}\n"
         )
     )
     with pytest.raises(UsageError, match=r"x\.config\.env_config: .*cannot be built"):
-        E.validate(exp)
+        experiment.validate(exp)
 
 
 def test_test_mode_shortens_race_episodes_so_race_metrics_appear(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml(
             "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n"
             "  config: {env_config: {map_id: 3, max_episode_steps: 1000}}\n"
         )
     )
-    E.apply_overrides(exp, test=True)
-    assert exp.config["env_config"] == {"map_id": 3, "max_episode_steps": RACE.test_env_config["max_episode_steps"]}
-    assert E.validate(exp).env_config["max_episode_steps"] == RACE.test_env_config["max_episode_steps"]
+    experiment.apply_overrides(exp, test=True)
+    assert exp.config["env_config"] == {
+        "map_id": 3,
+        "max_episode_steps": RACE.test_env_config["max_episode_steps"],
+    }
+    assert (
+        experiment.validate(exp).env_config["max_episode_steps"]
+        == RACE.test_env_config["max_episode_steps"]
+    )

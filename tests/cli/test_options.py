@@ -6,15 +6,14 @@ from pathlib import Path
 
 import pytest
 
-from rllib_asor.cli import cluster, grid
-from rllib_asor.cli import experiment as E
+from rllib_asor.cli import cluster, experiment, grid
 from rllib_asor.cli.errors import UsageError
 
 REPO = Path(__file__).resolve().parents[2]
 
 
 def test_stop_flags_parse_numbers_and_translate_legacy_names():
-    stop = E.parse_stop_flags(
+    stop = experiment.parse_stop_flags(
         ["training_iteration=10", "episode_reward_mean=150.5", "timesteps_total=1e5"]
     )
     assert stop == {
@@ -27,39 +26,39 @@ def test_stop_flags_parse_numbers_and_translate_legacy_names():
 @pytest.mark.parametrize("item", ["training_iteration", "=3", "training_iteration=abc"])
 def test_bad_stop_flag_is_refused(item):
     with pytest.raises(UsageError, match="--stop"):
-        E.parse_stop_flags([item])
+        experiment.parse_stop_flags([item])
 
 
 def test_cli_stop_overrides_file_stop(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml(
             "x:\n  env: CartPole-v1\n  run: PPO\n  stop: {training_iteration: 5, timesteps_total: 9}\n"
         )
     )
-    E.apply_overrides(exp, stop={"training_iteration": 1})
+    experiment.apply_overrides(exp, stop={"training_iteration": 1})
     assert exp.stop == {"training_iteration": 1, "num_env_steps_sampled_lifetime": 9}
 
 
 def test_test_mode_is_tiny_with_fractional_env_runners(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml(
             "x:\n  env: CartPole-v1\n  run: PPO\n  config: {train_batch_size: 4000, minibatch_size: 512}\n"
         )
     )
-    E.apply_overrides(exp, test=True)
-    cfg = E.validate(exp)
+    experiment.apply_overrides(exp, test=True)
+    cfg = experiment.validate(exp)
     assert cfg.num_env_runners == 2 and cfg.num_cpus_per_env_runner == 0.5
-    assert cfg.train_batch_size_per_learner == E.TEST_BATCH
+    assert cfg.train_batch_size_per_learner == experiment.TEST_BATCH
     assert cfg.minibatch_size <= cfg.train_batch_size_per_learner
     assert exp.stop == {"training_iteration": 2}
-    assert E.required_cpus(cfg) <= 2
+    assert experiment.required_cpus(cfg) <= 2
 
 
 def test_num_env_runners_and_checkpoint_flags(write_yaml):
-    [exp] = E.load_file(write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n"))
-    E.apply_overrides(exp, num_env_runners=3, checkpoint_freq=4)
-    assert E.validate(exp).num_env_runners == 3
-    assert E.checkpoint_kwargs(exp) == {
+    [exp] = experiment.load_file(write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n"))
+    experiment.apply_overrides(exp, num_env_runners=3, checkpoint_freq=4)
+    assert experiment.validate(exp).num_env_runners == 3
+    assert experiment.checkpoint_kwargs(exp) == {
         "num_to_keep": 3,
         "checkpoint_at_end": True,
         "checkpoint_frequency": 4,
@@ -67,7 +66,7 @@ def test_num_env_runners_and_checkpoint_flags(write_yaml):
 
 
 def test_grid_search_anywhere_becomes_tune_grid_in_param_space(write_yaml):
-    [exp] = E.load_file(
+    [exp] = experiment.load_file(
         write_yaml("""
         x:
           env: CartPole-v1
@@ -80,7 +79,7 @@ def test_grid_search_anywhere_becomes_tune_grid_in_param_space(write_yaml):
             asor: {lambda_: {grid_search: [0.0, 0.1]}, mode: srpo}
     """)
     )
-    space = E.param_space(exp, E.validate(exp))
+    space = experiment.param_space(exp, experiment.validate(exp))
     assert space["lr"] == {"grid_search": [0.001, 0.0001]}
     assert space["lambda"] == {"grid_search": [0.9, 0.95]}
     assert space["_model_config"]["fcnet_hiddens"] == {"grid_search": [[32], [64, 64]]}
@@ -91,8 +90,8 @@ def test_grid_search_anywhere_becomes_tune_grid_in_param_space(write_yaml):
 def test_lava_seed_sweep_expands_to_12_concrete_trials():
     from ray.tune.search.variant_generator import generate_variants
 
-    [exp] = E.load_file(str(REPO / "tuned_examples/sweeps/lava-seeds.yaml"))
-    space = E.param_space(exp, E.validate(exp))
+    [exp] = experiment.load_file(str(REPO / "tuned_examples/sweeps/lava-seeds.yaml"))
+    space = experiment.param_space(exp, experiment.validate(exp))
     variants = [spec for _, spec in generate_variants(space)]
     assert len(variants) == exp.num_trials == 12
     combos = {(v["seed"], v["asor"]["mode"], v["asor"]["lambda_"]) for v in variants}
@@ -103,8 +102,8 @@ def test_lava_seed_sweep_expands_to_12_concrete_trials():
 
 @pytest.mark.parametrize("name", ["ppo", "ppo-srpo", "ppo-asor"])
 def test_lava_examples_validate(name):
-    [exp] = E.load_file(str(REPO / f"tuned_examples/lava/{name}.yaml"))
-    cfg = E.validate(exp)
+    [exp] = experiment.load_file(str(REPO / f"tuned_examples/lava/{name}.yaml"))
+    cfg = experiment.validate(exp)
     assert cfg.env == "rllib_asor/LavaWorld-v0"
     assert cfg.model_config["fcnet_hiddens"] == [64, 64]
     assert exp.stop == {"num_env_steps_sampled_lifetime": 150000}

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from rllib_asor.cli import experiment as E
+from rllib_asor.cli import experiment
 from rllib_asor.cli.errors import UsageError
 
 REPO = Path(__file__).resolve().parents[2]
@@ -34,14 +34,14 @@ def test_there_are_examples_of_every_kind():
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: f"{p.parent.name}/{p.stem}")
 def test_example_parses_and_validates(path, monkeypatch):
     monkeypatch.chdir(REPO)  # offline `input` paths are relative to the repository root
-    for exp in E.load_file(str(path)):
+    for exp in experiment.load_file(str(path)):
         assert exp.warnings == []  # our own files use no legacy keys
         assert exp.num_trials >= 1
-        if E.missing_inputs(exp.config.get("input")):
+        if experiment.missing_inputs(exp.config.get("input")):
             with pytest.raises(UsageError, match="make datasets"):
-                E.validate(exp)
+                experiment.validate(exp)
             continue
-        config = E.validate(exp)
+        config = experiment.validate(exp)
         assert config.env == exp.env
 
 
@@ -50,8 +50,8 @@ def test_plain_sac_and_cql_files_get_the_fast_off_policy_path(tmp_path):
     opt out with `learner_config_dict: {fast_off_policy: false}`."""
     from rllib_asor.rllib.learners import FastSACTorchLearner
 
-    [exp] = E.load_file(str(REPO / "tuned_examples/mujoco/sac-hopper.yaml"))
-    config = E.validate(exp)
+    [exp] = experiment.load_file(str(REPO / "tuned_examples/mujoco/sac-hopper.yaml"))
+    config = experiment.validate(exp)
     assert config.learner_class is FastSACTorchLearner
     assert config.replay_buffer_config["storage"] == "flat"
     text = (REPO / "tuned_examples/mujoco/sac-hopper.yaml").read_text()
@@ -61,5 +61,5 @@ def test_plain_sac_and_cql_files_get_the_fast_off_policy_path(tmp_path):
             "  config:\n", "  config:\n    learner_config_dict: {fast_off_policy: false}\n", 1
         )
     )
-    [exp] = E.load_file(str(path))
-    assert E.validate(exp).learner_class is not FastSACTorchLearner
+    [exp] = experiment.load_file(str(path))
+    assert experiment.validate(exp).learner_class is not FastSACTorchLearner

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from rllib_asor.asor.config import AsorConfig
-from rllib_asor.cli import experiment as E
+from rllib_asor.cli import experiment
 from rllib_asor.cli.main import main
 
 REPO = Path(__file__).resolve().parents[2]
@@ -41,7 +41,7 @@ def _last_result(experiment_dir: Path) -> tuple[Path, dict]:
 @pytest.mark.parametrize("path", MUJOCO + HIGHWAY, ids=lambda p: f"{p.parent.name}/{p.stem}")
 def test_asor_examples_use_the_robust_default_and_srpo_examples_the_paper(path):
     """Validation itself: tests/examples/test_every_example.py."""
-    [exp] = E.load_file(str(path))
+    [exp] = experiment.load_file(str(path))
     mode = {"asor": "asor", "srpo": "srpo"}.get(path.stem.split("-")[1] if "-" in path.stem else "")
     if mode is None:
         assert exp.asor is None

@@ -56,10 +56,14 @@ def test_stage_moves_on_when_the_recent_episodes_meet_the_threshold():
     cb._push = lambda algorithm: pushed.append(cb.stage)  # no env runners in this test
 
     def result(e2, s2, e6, s6):
-        return {"env_runners": {"race": {
-            "map_2": {"episodes": e2, "success_sum": s2},
-            "map_6": {"episodes": e6, "success_sum": s6},
-        }}}
+        return {
+            "env_runners": {
+                "race": {
+                    "map_2": {"episodes": e2, "success_sum": s2},
+                    "map_6": {"episodes": e6, "success_sum": s6},
+                }
+            }
+        }
 
     for totals in [(0, 0, 0, 0), (4, 4, 2, 2)]:  # map 6 has too few episodes yet
         r = result(*totals)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from rllib_asor.cli import experiment as E
+from rllib_asor.cli import experiment
 from rllib_asor.cli.main import main
 
 REPO = Path(__file__).resolve().parents[2]
@@ -25,8 +25,8 @@ RACE_YAMLS = sorted((REPO / "tuned_examples/race").glob("*.yaml")) + sorted(
 
 @pytest.mark.parametrize("path", RACE_YAMLS, ids=lambda p: p.name)
 def test_race_example_gets_the_race_network_metrics_and_asor_inputs(path):
-    for exp in E.load_file(str(path)):
-        cfg = E.validate(exp)
+    for exp in experiment.load_file(str(path)):
+        cfg = experiment.validate(exp)
         assert exp.warnings == []  # no legacy keys in our own examples
         assert exp.env.startswith("game_env/ObstacleRace")
         assert cfg._rl_module_spec.module_class.__name__ == "RaceNetModule"
@@ -43,18 +43,18 @@ def test_race_example_gets_the_race_network_metrics_and_asor_inputs(path):
 def test_curriculum_example_adds_the_map_curriculum():
     from rllib_asor.rllib.curriculum import MapCurriculumCallback
 
-    [exp] = E.load_file(str(REPO / "tuned_examples/race/ppo-asor-curriculum.yaml"))
-    cfg = E.validate(exp)
+    [exp] = experiment.load_file(str(REPO / "tuned_examples/race/ppo-asor-curriculum.yaml"))
+    cfg = experiment.validate(exp)
     _, curriculum = cfg.callbacks_class
     assert issubclass(curriculum, MapCurriculumCallback)
     assert curriculum.curriculum.stages == ((6, 2), (6, 2, 8, 7, 1), None)
-    assert "curriculum" not in E.param_space(exp, cfg)  # applied as a callback, not a key
+    assert "curriculum" not in experiment.param_space(exp, cfg)  # applied as a callback, not a key
 
 
 def test_race_sweep_expands_lambda_rho_and_seeds():
-    [exp] = E.load_file(str(REPO / "tuned_examples/sweeps/race-asor.yaml"))
+    [exp] = experiment.load_file(str(REPO / "tuned_examples/sweeps/race-asor.yaml"))
     assert exp.num_trials == 24
-    space = E.param_space(exp, E.validate(exp))
+    space = experiment.param_space(exp, experiment.validate(exp))
     assert set(space["asor"]) >= {"lambda_", "rho_value", "rho_count"}
     assert "grid_search" in space["seed"]
 

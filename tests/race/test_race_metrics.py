@@ -92,7 +92,10 @@ def test_per_map_metrics_and_lifetime_totals():
         ep = SingleAgentEpisode()
         ep.add_env_reset(observation=obs(), infos={"map_id": map_id})
         ep.add_env_step(
-            obs(), 0, 1.0, infos={"map_id": map_id, "episode_metrics": metrics(success)},
+            obs(),
+            0,
+            1.0,
+            infos={"map_id": map_id, "episode_metrics": metrics(success)},
             terminated=True,
         )
         RaceMetricsCallback().on_episode_end(episode=ep, metrics_logger=logger, env_index=0)
