@@ -83,6 +83,7 @@ def sac_config(task: str, seed: int, asor: dict[str, Any] | None, args: argparse
     from ray.rllib.algorithms.sac import SACConfig
 
     import rllib_asor
+    from rllib_asor.data.collect import MUJOCO_SAC_MODEL, MUJOCO_SAC_TRAINING
 
     # Native ratio with one local env: 256 replayed rows per sampled step; utd·256 per step.
     config = (
@@ -92,21 +93,12 @@ def sac_config(task: str, seed: int, asor: dict[str, Any] | None, args: argparse
         )
         .env_runners(num_env_runners=0, num_envs_per_env_runner=1)
         .training(
-            gamma=0.99,
-            lr=None,
-            actor_lr=3e-4,
-            critic_lr=3e-4,
-            alpha_lr=3e-4,
-            tau=0.005,
-            twin_q=True,
-            initial_alpha=1.0,
-            n_step=1,
-            train_batch_size_per_learner=256,
+            **MUJOCO_SAC_TRAINING,
             num_steps_sampled_before_learning_starts=args.learning_starts,
             replay_buffer_config={"type": "EpisodeReplayBuffer", "capacity": 100000},
             training_intensity=args.utd * 256,
         )
-        .rl_module(model_config={"fcnet_hiddens": [256, 256], "fcnet_activation": "relu"})
+        .rl_module(model_config=MUJOCO_SAC_MODEL)
         .reporting(min_sample_timesteps_per_iteration=args.iter_steps)
         .debugging(seed=seed)
     )

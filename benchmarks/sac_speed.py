@@ -48,6 +48,8 @@ from typing import Any
 
 import numpy as np
 
+from rllib_asor.data.collect import MUJOCO_SAC_MODEL, MUJOCO_SAC_TRAINING
+
 ENV_ID = "rllib_asor/HopperShift-v0"
 ENV_PARAMS = ["mass", "damping", "wind"]
 RUNNERS = ("sb3", "rllib_stock", "rllib", "asor_stock", "asor")
@@ -108,22 +110,13 @@ def sac_config(args: argparse.Namespace) -> Any:
         .env_runners(num_env_runners=0, num_envs_per_env_runner=1)
         .learners(num_learners=0)
         .training(
-            gamma=0.99,
-            lr=None,
-            actor_lr=3e-4,
-            critic_lr=3e-4,
-            alpha_lr=3e-4,
-            tau=0.005,
-            twin_q=True,
-            initial_alpha=1.0,
-            n_step=1,
-            train_batch_size_per_learner=256,
+            **MUJOCO_SAC_TRAINING,
             num_steps_sampled_before_learning_starts=args.warmup,
             replay_buffer_config={"type": "EpisodeReplayBuffer", "capacity": 100_000},
             # replayed rows per sampled step: 256 = one gradient step of batch 256 per env step
             training_intensity=256,
         )
-        .rl_module(model_config={"fcnet_hiddens": [256, 256], "fcnet_activation": "relu"})
+        .rl_module(model_config=MUJOCO_SAC_MODEL)
         .reporting(min_sample_timesteps_per_iteration=1)
         .debugging(seed=args.seed)
     )
@@ -307,7 +300,7 @@ def cql_update_speed(args: argparse.Namespace) -> dict[str, Any]:
             bc_iters=0,
             min_q_weight=5.0,
         )
-        .rl_module(model_config={"fcnet_hiddens": [256, 256], "fcnet_activation": "relu"})
+        .rl_module(model_config=MUJOCO_SAC_MODEL)
         .debugging(seed=args.seed)
     )
     variants = {

@@ -100,6 +100,22 @@ def sac_config(env_id: str, dynamics: str, steps: int, seed: int) -> Any:
     )
 
 
+MUJOCO_SAC_TRAINING = {
+    "gamma": 0.99,
+    "lr": None,
+    "actor_lr": 3e-4,
+    "critic_lr": 3e-4,
+    "alpha_lr": 3e-4,
+    "tau": 0.005,
+    "twin_q": True,
+    "initial_alpha": 1.0,
+    "n_step": 1,
+    "train_batch_size_per_learner": 256,
+}
+"""SAC's usual MuJoCo settings (the SAC paper, SB3, CleanRL): batch 256, lr 3e-4, τ 0.005."""
+MUJOCO_SAC_MODEL = {"fcnet_hiddens": [256, 256], "fcnet_activation": "relu"}
+"""256x256 ReLU networks."""
+
 MUJOCO_PPO_TRAINING = {
     "num_epochs": 10,
     "lr": 3e-4,
