@@ -35,7 +35,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "lambda_warmup": True,
         "shaping": "potential",
         "reward_form": "logit",
-        "bonus_norm": "running",
+        "bonus_norm": "batch",
         "real_source": "archive",
         "disc_lr": 3e-4,
         "disc_grad_penalty": 5.0,
@@ -102,9 +102,10 @@ class AsorConfig:
     """log: log ω (paper, ≤ 0); centered: log ω minus its batch mean; gail: −log(1 − ω) ≥ 0;
     logit: the discriminator logit clipped to ±`logit_clip` (AIRL/DAC form, two-signed)."""
     bonus_norm: str | None = None
-    """Standardise the bonus, then clip it to ±`bonus_clip`: running (robust: by its running
-    mean/std over all batches so far), batch (by this batch's mean/std, like PPO's advantage
-    normalisation), or off (paper)."""
+    """Standardise the bonus, then clip it to ±`bonus_clip`: batch (robust: by this batch's
+    mean/std, like PPO's advantage normalisation; keeps the bonus's size fixed relative to the
+    reward scale however the discriminator drifts), running (by its running mean/std over all
+    batches so far; the robust default until session 4), or off (paper)."""
     shaping: str | None = None
     """potential (robust): r + λ·(γ·b(s′) − b(s)) (Ng et al. 1999: the optimal policy cannot
     change; b(s′) = 0 after termination); direct (paper): r + λ·b(s)."""
