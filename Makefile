@@ -26,7 +26,7 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# The main job: train a racer (~15-20 min on 2 cores), evaluate it on unseen courses, report + GIF.
+# The main job: train a racer (~5 min on 2 idle cores), evaluate it on unseen courses, report + GIF.
 train: $(STAMP)
 	$(VENV)/bin/rllib quickstart
 

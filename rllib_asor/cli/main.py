@@ -55,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     p_eval.set_defaults(func=evaluate.run)
     p_quick = sub.add_parser(
         "quickstart",
-        help="train a racer (~15 min), evaluate it on unseen courses, report + GIF (make train)",
+        help="train a racer (~5 min), evaluate it on unseen courses, report + GIF (make train)",
     )
     quickstart.add_arguments(p_quick)
     _add_verbose(p_quick)

@@ -1,7 +1,7 @@
 """`rllib quickstart` (what `make train` runs): train a racer, then show what it learned.
 
 1. trains `tuned_examples/race/ppo-asor-quickstart.yaml` (PPO + ASOR on the obstacle race,
-   250k env steps, about 15 minutes on 2 cores) with the live progress line of `rllib train`;
+   250k env steps, about 5 minutes on 2 idle cores) with the live progress line of `rllib train`;
 2. evaluates the trained policy on every map, on course seeds training never drew;
 3. writes into the experiment's `report/`: report.md and learning curves (`rllib report`),
    race_eval.md / race_eval.json (the evaluation) and racer.gif (one episode);
@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     path = _find_file(args.file)
     print(
         f"rllib quickstart: training {path} "
-        + ("(smoke run)" if args.test else "(about 15 min on 2 cores; Ctrl-C stops it)"),
+        + ("(smoke run)" if args.test else "(about 5 min on 2 idle cores; Ctrl-C stops it)"),
         flush=True,
     )
     t0 = time.monotonic()
