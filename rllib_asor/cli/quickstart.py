@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from rllib_asor.cli import train
+from rllib_asor.cli import experiment, train
 from rllib_asor.cli.errors import UsageError
 from rllib_asor.rllib.env_families import RACE, family_of
 
@@ -51,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise UsageError(f"{args.episodes} is invalid: allowed an integer >= 1", key="--episodes")
     path = _find_file(args.file)
+    _check_one_race_trial(path)  # before training, not after
     print(
         f"rllib quickstart: training {path} "
         + ("(smoke run)" if args.test else "(about 5 min on 2 idle cores; Ctrl-C stops it)"),
@@ -73,15 +74,10 @@ def run(args: argparse.Namespace) -> int:
         checkpoint_freq=None,
         keep_checkpoints=None,
     )
-    [(exp, results)] = _one(train.train(train_args), path)
+    [(exp, results)] = train.train(train_args)
     train_s = time.monotonic() - t0
     if train.print_summary(exp, results):
         return 1
-    if family_of(exp.env) is not RACE:
-        raise UsageError(
-            f"{exp.env!r} is not the race: allowed envs {', '.join(p + '...' for p in RACE.prefixes)}",
-            source=path,
-        )
     result = results[0]
     out = Path(train.storage_path(train_args, exp), exp.name, "report")
     max_steps = TEST_EPISODE_STEPS if args.test else _episode_steps(exp)
@@ -107,10 +103,13 @@ def _find_file(path: str) -> str:
     raise UsageError("not found; allowed: a race experiment YAML file", source=path)
 
 
-def _one(outcomes: list[tuple[Any, Any]], path: str) -> list[tuple[Any, Any]]:
-    if len(outcomes) != 1 or len(outcomes[0][1]) != 1:
+def _check_one_race_trial(path: str) -> None:
+    exps = experiment.load_file(path)
+    if len(exps) != 1 or exps[0].num_trials != 1:
         raise UsageError("allowed: a file with one experiment of one trial", source=path)
-    return outcomes
+    if family_of(exps[0].env) is not RACE:
+        allowed = ", ".join(p + "..." for p in RACE.prefixes)
+        raise UsageError(f"{exps[0].env!r} is not the race: allowed envs {allowed}", source=path)
 
 
 def _episode_steps(exp: Any) -> int:

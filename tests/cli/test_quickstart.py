@@ -40,3 +40,7 @@ def test_quickstart_rejects_a_file_that_is_not_the_race(tmp_path, write_yaml, cl
     assert res.rc == 2 and "missing.yaml" in res.err and "not found" in res.err
     res = run_cli(["quickstart", "--episodes", "0"])
     assert res.rc == 2 and "--episodes" in res.err
+    lava = write_yaml("lava:\n  env: rllib_asor/LavaWorld-v0\n  run: PPO\n")
+    res = run_cli(["quickstart", "--file", lava, "--storage-path", str(tmp_path)])
+    assert res.rc == 2 and "is not the race" in res.err
+    assert not (tmp_path / "lava").exists()  # refused before training
