@@ -27,7 +27,6 @@ HARMLESS = re.compile(
             "Checkpoint successfully created at",
             "Wrote the latest version of all result files",
             "Total run time:",
-            "is deprecated and will be removed",  # Ray's own API moves (Tune, RLlib)
             "To visualize your results with TensorBoard",
             "View detailed results here",
             "If your trainable is slow to initialize",  # Tune, on a loaded machine
