@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import sys
 from collections.abc import Sequence
@@ -11,16 +10,6 @@ from typing import NoReturn
 
 from rllib_asor.cli import quiet
 from rllib_asor.cli.errors import UsageError
-
-
-def _report_module():
-    """`rllib_asor.cli.report` (written separately); None while it does not exist."""
-    try:
-        return importlib.import_module("rllib_asor.cli.report")
-    except ModuleNotFoundError as e:
-        if e.name != "rllib_asor.cli.report":
-            raise
-        return None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -32,7 +21,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The full `rllib` parser."""
-    from rllib_asor.cli import data, evaluate, quickstart, train
+    from rllib_asor.cli import data, evaluate, quickstart, report, train
 
     parser = _Parser(
         prog="rllib", description="Train and evaluate RLlib (new API stack) agents, with ASOR."
@@ -61,13 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_verbose(p_quick)
     p_quick.set_defaults(func=quickstart.run)
     p_report = sub.add_parser("report", help="tables and curves from a results directory")
-    report = _report_module()
-    if report is not None:
-        report.add_arguments(p_report)
-        p_report.set_defaults(func=report.run)
-    else:
-        p_report.add_argument("rest", nargs=argparse.REMAINDER)
-        p_report.set_defaults(func=_report_missing)
+    report.add_arguments(p_report)
+    p_report.set_defaults(func=report.run)
     p_data = sub.add_parser("data", help="offline datasets: collect, info, score (docs/offline.md)")
     data.add_arguments(p_data, common=_add_verbose)
     p_data.set_defaults(func=data.run)
@@ -91,10 +75,6 @@ def _version() -> str:
     except PackageNotFoundError:  # running from a source tree that was not installed
         ours = "unknown"
     return f"rllib-asor {ours} (ray {version('ray')}, torch {version('torch')})"
-
-
-def _report_missing(args: argparse.Namespace) -> int:
-    raise UsageError("not available yet (rllib_asor.cli.report is not installed)", key="report")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
