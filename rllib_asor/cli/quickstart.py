@@ -155,9 +155,9 @@ def _evaluation_section(evaluation: dict[str, Any], max_steps: int) -> str:
 
 
 def _write(path: Path, text: str) -> Path:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    from rllib_asor.report.render import atomic_write
+
+    atomic_write(path, text.encode())
     return path
 
 

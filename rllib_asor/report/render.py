@@ -37,7 +37,8 @@ def _slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "env"
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
+def atomic_write(path: Path, data: bytes) -> None:
+    """Write `data` to `path` via a temp file and `os.replace` (no half-written file)."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
@@ -130,7 +131,7 @@ def plot_env(report: Report, env: str, path: Path) -> None:
         fig.savefig(buf, format="png")
     finally:
         plt.close(fig)
-    _atomic_write(path, buf.getvalue())
+    atomic_write(path, buf.getvalue())
 
 
 def render_markdown(report: Report, results_dir: Path, plots: dict[str, str]) -> str:
@@ -226,10 +227,10 @@ def make_report(
         ],
         "notes": report.notes,
     }
-    _atomic_write(
+    atomic_write(
         out / "summary.json",
         (json.dumps(_jsonable(summary), indent=2, allow_nan=False) + "\n").encode(),
     )
     md = out / "report.md"
-    _atomic_write(md, render_markdown(report, root, plots).encode())
+    atomic_write(md, render_markdown(report, root, plots).encode())
     return md
