@@ -16,7 +16,10 @@ Runners (`--runners`):
 - `rllib`: the same config through `rllib_asor.fast_off_policy(config)` (the fast path the SAC
   tuned examples and `with_asor` use; rllib_asor/rllib/fast_sac.py).
 - `asor_stock`: ASOR on RLlib's stock path (`learner_config_dict["fast_off_policy"] = False`).
-- `asor`: `rllib_asor.with_asor(config)` (the robust default; fast path by default).
+- `asor`: `rllib_asor.with_asor(config)` (the robust default; fast path by default: the
+  discriminator and RND take one minibatch per Learner call of 16 SAC steps).
+- `asor_every_step`: the same with `aux_epochs=1`: discriminator and RND trained with every SAC
+  gradient step (the fast path's default until session 5).
 
 Stable-Baselines3 is a benchmark-only dependency (`pip install -e ".[bench]"`, which keeps torch
 pinned; it is never needed by `make test`). Run:
@@ -52,13 +55,14 @@ from rllib_asor.data.collect import MUJOCO_SAC_MODEL, MUJOCO_SAC_TRAINING
 
 ENV_ID = "rllib_asor/HopperShift-v0"
 ENV_PARAMS = ["mass", "damping", "wind"]
-RUNNERS = ("sb3", "rllib_stock", "rllib", "asor_stock", "asor")
+RUNNERS = ("sb3", "rllib_stock", "rllib", "asor_stock", "asor", "asor_every_step")
 LABELS = {
     "sb3": "Stable-Baselines3 `SAC`",
     "rllib_stock": "RLlib 2.60 `SACConfig` as a user writes it (stock path)",
     "rllib": "RLlib SAC, rllib_asor fast path (`fast_off_policy`, tuned examples)",
     "asor_stock": "SAC + ASOR on the stock path",
     "asor": "SAC + ASOR, `with_asor(SACConfig...)` (fast path by default)",
+    "asor_every_step": "SAC + ASOR, fast path, aux nets trained every SAC step (`aux_epochs=1`)",
 }
 
 
@@ -134,6 +138,8 @@ class RllibRunner:
             config = fast_off_policy(config)
         elif name == "asor":
             config = rllib_asor.with_asor(config, seed=args.seed)
+        elif name == "asor_every_step":
+            config = rllib_asor.with_asor(config, seed=args.seed, aux_epochs=1)
         elif name == "asor_stock":
             config = rllib_asor.with_asor(fast_off_policy(config, enabled=False), seed=args.seed)
         self.algo = config.build_algo()

@@ -144,10 +144,12 @@ class AsorConfig:
     """Normalise the discriminator's inputs by running mean/std (clipped ±5)."""
     label_smoothing: float = 0.0
     """Targets 1−ε / ε for real / generated; > 0 keeps ω from saturating (docs/results.md, lava world)."""
-    aux_epochs: int = 1
-    """Passes of the discriminator and proxy over each train batch (PPO runs `num_epochs`
-    passes for the policy). One pass keeps ω from saturating (docs/results.md, lava world) and halves
-    ASOR's cost at 6 PPO epochs."""
+    aux_epochs: float | None = None
+    """Passes of the discriminator and proxy over each train batch; a fraction trains them on
+    that share of it. None (default): one pass on PPO and CQL (PPO runs `num_epochs` passes for
+    the policy; one keeps ω from saturating, docs/results.md, lava world); one minibatch per
+    Learner call on SAC's fast path (its calls hold 16 gradient steps of replayed rows;
+    docs/results.md, SAC speed)."""
     rnd_hiddens: list[int] = field(default_factory=lambda: [128, 128])
     """RND target/predictor MLP hidden sizes."""
     rnd_embedding_dim: int = 64
@@ -217,6 +219,10 @@ class AsorConfig:
         for key in ("lambda_relative", "lambda_warmup", "disc_input_norm"):
             if not isinstance(getattr(self, key), bool):
                 _fail(key, getattr(self, key), "true or false")
+        if self.aux_epochs is not None and (
+            not _is_number(self.aux_epochs) or not 0 < self.aux_epochs <= 100
+        ):
+            _fail("aux_epochs", self.aux_epochs, "a number in (0, 100] or null (the default)")
         if not _is_number(self.label_smoothing) or not 0.0 <= self.label_smoothing < 0.5:
             _fail("label_smoothing", self.label_smoothing, "a number in [0, 0.5)")
         for key in ("disc_hiddens", "rnd_hiddens"):
@@ -232,7 +238,6 @@ class AsorConfig:
         for key in (
             "rnd_embedding_dim",
             "ensemble_size",
-            "aux_epochs",
             "dynamics_buckets",
             "archive_size",
         ):

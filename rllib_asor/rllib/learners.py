@@ -128,17 +128,22 @@ class AsorLearnerMixin:
         return super()._update(batch, **kwargs)  # type: ignore[misc]
 
     def _cap_aux_passes(self, batch: dict[str, Any]) -> dict[str, Any]:
-        """Drop aux modules from minibatches once they had `aux_epochs` passes this update."""
-        sizes = self._asor_piece.aux_batch_sizes
+        """Drop aux modules from minibatches once they trained on `aux_rows` rows this update."""
         kept = {}
         for module_id, module_batch in batch.items():
             if is_aux_module(module_id):
                 done = self._asor_rows_trained.get(module_id, 0)
-                if done >= self.asor.aux_epochs * sizes.get(module_id, 0):
+                if done >= self.aux_rows(module_id):
                     continue
                 self._asor_rows_trained[module_id] = done + len(module_batch[Columns.OBS])
             kept[module_id] = module_batch
         return kept
+
+    def aux_rows(self, module_id: str) -> float:
+        """Rows the aux module trains on per update: `aux_epochs` passes over its batch (one
+        pass when unset)."""
+        size = self._asor_piece.aux_batch_sizes.get(module_id, 0)
+        return (1.0 if self.asor.aux_epochs is None else self.asor.aux_epochs) * size
 
     def configure_optimizers_for_module(self, module_id: str, config: Any = None) -> None:
         if not is_aux_module(module_id):
@@ -279,6 +284,14 @@ class AsorSACTorchLearner(FastSACLearnerMixin, _SoftQAsorMixin, SACTorchLearner)
     def _flat_batch_hook(self, batch: dict[str, Any]) -> dict[str, Any]:
         self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)
         return batch
+
+    def aux_rows(self, module_id: str) -> float:
+        """On the fast path (a call = STEPS_PER_CALL gradient steps on replayed rows) the aux
+        modules take one minibatch per call unless `aux_epochs` is set: a pass over the call's
+        rows would train them on every SAC step, doubling its cost (docs/results.md)."""
+        if getattr(self, "_fast_steps", False) and self.asor.aux_epochs is None:
+            return 1.0
+        return super().aux_rows(module_id)
 
 
 class AsorCQLTorchLearner(_SoftQAsorMixin, CQLTorchLearner):

@@ -213,16 +213,24 @@ def test_fast_sac_asor_runs_asor_once_per_learner_call(ray_session):
             return original(batch)
 
         learner._flat_batch_hook = hook
-        steps = []  # policy rows of every gradient step
-        update = learner._update
-        learner._update = lambda batch, **kw: (
-            steps.append(len(batch["default_policy"][Columns.REWARDS])) or update(batch, **kw)
-        )
+        steps, aux_steps = [], []  # policy rows of every gradient step; aux modules in it
+        update = learner._cap_aux_passes
+
+        def cap(batch):
+            kept = update(batch)
+            steps.append(len(kept["default_policy"][Columns.REWARDS]))
+            aux_steps.append(sorted(m for m in kept if m != "default_policy"))
+            return kept
+
+        learner._cap_aux_passes = cap
         for _ in range(3):
             result = algo.train()
         assert piece_calls and set(piece_calls) == {32 * STEPS_PER_CALL}
         # the aux modules' batches do not add gradient steps: STEPS_PER_CALL per call
         assert len(steps) == STEPS_PER_CALL * len(piece_calls) and set(steps) == {32}
+        # ... and by default they train on the first minibatch of each call only
+        aux = ["asor_disc.default_policy", "asor_proxy.default_policy"]
+        assert aux_steps == ([aux] + [[]] * (STEPS_PER_CALL - 1)) * len(piece_calls)
         assert np.isfinite(result["asor"]["disc_loss"])
         assert {"asor_disc.default_policy"} <= set(result["learners"])
     finally:
@@ -261,6 +269,9 @@ def _pendulum_return(variant: str, seed: int, steps: int) -> float:
     )
     if variant != "stock":
         config = fast_off_policy(config)
+    if variant.startswith("asor"):  # the default; asor_every_step: aux nets every SAC step
+        extra = {"aux_epochs": 1} if variant == "asor_every_step" else {}
+        config = rllib_asor.with_asor(config, seed=seed, **extra)
     if variant == "fast_data":
         config.rl_module(rl_module_spec=RLModuleSpec(module_class=DefaultSACTorchRLModule))
     algo = config.build_algo()
@@ -315,6 +326,19 @@ def test_fast_path_with_concat_critics_learns_pendulum_at_least_as_well(ray_sess
     assert np.mean(fast) > -500
     spread = np.sqrt((np.var(stock, ddof=1) + np.var(fast, ddof=1)) / 2)
     assert np.mean(fast) > np.mean(stock) - (2 * spread + 100)
+
+
+@pytest.mark.slow
+def test_sac_asor_with_one_aux_minibatch_per_call_learns_pendulum(ray_session):
+    """SAC+ASOR's default rhythm on the fast path (discriminator and RND on one minibatch per
+    16-step Learner call) learns, and not worse than training them with every SAC step
+    (`aux_epochs=1`) by more than 2 pooled seed standard deviations + 100 (3 seeds)."""
+    default = [_pendulum_return("asor", s, STEPS) for s in SEEDS]
+    every = [_pendulum_return("asor_every_step", s, STEPS) for s in SEEDS]
+    print(f"pendulum returns after {STEPS} steps: asor {default} asor_every_step {every}")
+    assert np.mean(default) > -500
+    spread = np.sqrt((np.var(default, ddof=1) + np.var(every, ddof=1)) / 2)
+    assert np.mean(default) > np.mean(every) - (2 * spread + 100)
 
 
 def test_fast_sac_asor_trains_on_a_remote_learner(ray_session):

@@ -1,0 +1,155 @@
+"""Race PPO(+ASOR) end to end, side by side across source trees (issue 11).
+
+One measurement = one fresh process that builds `benchmarks.race_learning.race_config` (the race
+network, a map drawn per episode, 1000-step episodes, train batch 1024, minibatch 256, 4 epochs,
+ASOR's default of that tree with `obs_keys=[agent, destination]`), runs `--warmup` iterations,
+then times `--iters` calls of `algo.train()` by the wall clock: env steps/s end to end
+(sampling, connectors, forward passes, the learner update, ASOR's piece, metrics).
+
+`--trees A B ...` measures each source tree (a checkout, e.g. `git worktree add /tmp/old <commit>`)
+in turn, `--rounds` times, interleaved (A, B, A, B, ...), so load drifts hit every tree alike;
+each process imports `benchmarks` and `rllib_asor` from its tree (PYTHONPATH), this file is the
+only code they share. Two layouts (`--layouts`): `local` (race_learning's: sampling in the
+driver, 16 envs, one core) and `runners2` (the quickstart YAML's: 2 env runners × 8 envs at 0.5
+CPU each, the learner in the driver).
+
+    git worktree add /tmp/race-old fb9d406
+    python benchmarks/race_speed.py --trees /tmp/race-old . --rounds 3 --out benchmarks/out/race_speed
+    python benchmarks/race_speed.py --trees . --profile --layouts local   # cProfile, one process
+
+Writes OUT/race_speed.json (every measurement) and prints a markdown table (median env steps/s
+per tree and layout, and each tree's ratio to the first one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+LAYOUTS = {"local": (0, 16), "runners2": (2, 8)}
+"""Layout → (env runners, envs per runner)."""
+
+
+def measure_here(args: argparse.Namespace) -> dict[str, Any]:
+    """Build the race PPO(+ASOR) config of the tree on sys.path and time `--iters` iterations."""
+    import ray
+    import torch
+
+    from benchmarks.race_learning import race_config
+
+    torch.set_num_threads(1)
+    runners, envs = LAYOUTS[args.layout]
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    ns = argparse.Namespace(
+        steps=10**7, batch=1024, epochs=4, envs=envs, max_episode_steps=1000, train_map=None
+    )
+    asor = None if args.no_asor else {"mode": "asor"}
+    config = race_config(0, asor, ns)
+    if runners:
+        config = config.env_runners(
+            num_env_runners=runners, num_envs_per_env_runner=envs, num_cpus_per_env_runner=0.5
+        )
+    algo = config.build_algo()
+    for _ in range(args.warmup):
+        algo.train()
+    steps0 = algo.train()["num_env_steps_sampled_lifetime"]
+    prof = None
+    if args.profile:
+        import cProfile
+
+        prof = cProfile.Profile()
+        prof.enable()
+    t0 = time.perf_counter()
+    for _ in range(args.iters):
+        result = algo.train()
+    wall = time.perf_counter() - t0
+    if prof is not None:
+        import pstats
+
+        prof.disable()
+        pstats.Stats(prof).sort_stats("cumulative").print_stats(45)
+    steps = result["num_env_steps_sampled_lifetime"] - steps0
+    algo.stop()
+    ray.shutdown()
+    return {"env_steps": steps, "wall_s": wall, "env_steps_per_s": steps / wall}
+
+
+def run_tree(tree: Path, layout: str, args: argparse.Namespace) -> dict[str, Any]:
+    """One measurement in a fresh process that imports from `tree`."""
+    env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1", "PYTHONHASHSEED": "0"}
+    cmd = [
+        sys.executable, __file__, "--single", "--layout", layout,
+        "--iters", str(args.iters), "--warmup", str(args.warmup),
+    ] + (["--no-asor"] if args.no_asor else []) + (["--profile"] if args.profile else [])  # fmt: skip
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{tree} ({layout}) failed:\n{proc.stderr[-3000:]}")
+    if args.profile:
+        print(proc.stdout)
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--trees", nargs="+", default=["."], help="source trees to compare")
+    parser.add_argument("--layouts", nargs="+", choices=list(LAYOUTS), default=list(LAYOUTS))
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--iters", type=int, default=8, help="timed iterations (1024 steps each)")
+    parser.add_argument("--warmup", type=int, default=2)
+    parser.add_argument("--no-asor", action="store_true", help="plain PPO")
+    parser.add_argument("--profile", action="store_true", help="print a cProfile of the timing")
+    parser.add_argument("--out", default="benchmarks/out/race_speed")
+    parser.add_argument("--single", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--layout", default="local", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.single:
+        print(json.dumps(measure_here(args)))
+        return 0
+    trees = [Path(t).resolve() for t in args.trees]
+    rows: list[dict[str, Any]] = []
+    for r in range(args.rounds):
+        for layout in args.layouts:
+            for tree in trees:
+                res = run_tree(tree, layout, args) | {
+                    "tree": str(tree),
+                    "layout": layout,
+                    "round": r,
+                }
+                rows.append(res)
+                print(f"round {r} {layout} {tree}: {res['env_steps_per_s']:.0f} env steps/s")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    lines = [
+        "| tree | layout | env steps/s (median) | per round | ÷ first tree |",
+        "|---|---|---|---|---|",
+    ]
+    for layout in args.layouts:
+        base = None
+        for tree in trees:
+            rates = [
+                x["env_steps_per_s"]
+                for x in rows
+                if x["tree"] == str(tree) and x["layout"] == layout
+            ]
+            med = statistics.median(rates)
+            base = base or med
+            per = ", ".join(f"{v:.0f}" for v in rates)
+            lines.append(f"| {tree.name} | {layout} | {med:.0f} | {per} | {med / base:.2f} |")
+    md = "\n".join(lines) + "\n"
+    meta = {"load_avg_after": os.getloadavg(), "args": vars(args), "rows": rows}
+    (out / "race_speed.json").write_text(json.dumps(meta, indent=1))
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
