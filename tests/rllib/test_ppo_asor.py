@@ -156,10 +156,20 @@ def test_srpo_mode_builds_no_proxy(ray_session):
         algo.stop()
 
 
-@pytest.mark.parametrize("bad", [{"rho_value": 0.0}, {"lambda_": -1.0}, {"proxy": "counts"}])
+@pytest.mark.parametrize(
+    "bad",
+    [{"rho_value": 0.0}, {"lambda_": -1.0}, {"proxy": "counts"}, {"aux_epochs": 0}, {"aux_epochs": "1"}],
+)
 def test_with_asor_rejects_bad_settings(bad):
     with pytest.raises(ValueError, match="allowed"):
         lava_ppo(**bad)
+
+
+def test_aux_epochs_takes_fractions_and_defaults_to_unset():
+    from rllib_asor.asor.config import AsorConfig
+
+    assert AsorConfig().aux_epochs is None
+    assert AsorConfig(aux_epochs=0.25).aux_epochs == 0.25
 
 
 def test_with_asor_rejects_unsupported_algorithm():
