@@ -382,6 +382,17 @@ def algorithm_class(exp: Experiment) -> type:
     from ray.rllib.algorithms.registry import ALGORITHMS
     from ray.tune.registry import get_trainable_cls
 
+    learner_dict = exp.config.get("learner_config_dict")
+    if isinstance(learner_dict, dict) and learner_dict.get("overlap_sampling"):
+        if exp.run != "PPO":
+            raise UsageError(
+                f"works with run: PPO only, not {exp.run}",
+                source=exp.source,
+                key=f"{exp.name}.config.learner_config_dict.overlap_sampling",
+            )
+        from rllib_asor.rllib.overlap import OverlappedPPO
+
+        return OverlappedPPO  # PPO whose env runners sample during the update
     try:
         with _quiet():
             return get_trainable_cls(exp.run)

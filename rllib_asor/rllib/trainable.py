@@ -13,6 +13,7 @@ from typing import Any
 from ray.rllib.algorithms.algorithm import Algorithm
 from ray.tune.registry import get_trainable_cls
 
+from rllib_asor.rllib.overlap import OverlappedPPO
 from rllib_asor.rllib.wiring import SUPPORTED, with_asor
 
 ASOR_KEY = "asor"
@@ -39,7 +40,8 @@ def asor_trainable(run: str) -> type[Algorithm]:
     name = f"Asor{run}"
     cls = globals().get(name)
     if cls is None:
-        base = get_trainable_cls(run)
+        # PPO: `OverlappedPPO`, which is RLlib's PPO unless the config switches the overlap on.
+        base = OverlappedPPO if run == "PPO" else get_trainable_cls(run)
         cls = type(
             name,
             (base,),

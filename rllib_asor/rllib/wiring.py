@@ -69,7 +69,7 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
     asor = AsorConfig.from_dict(settings)
     if not isinstance(config, AlgorithmConfig):
         raise ValueError(f"with_asor needs an RLlib AlgorithmConfig, got {type(config).__name__}")
-    algo = config.algo_class.__name__ if config.algo_class is not None else type(config).__name__
+    algo = _algorithm_name(config)
     learner_class = SUPPORTED.get(algo)
     if learner_class is None:
         raise ValueError(
@@ -95,6 +95,14 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
     if config.is_multi_agent and config.policies_to_train is not None:
         config.multi_agent(policies_to_train=_AlsoTrainAux(config.policies_to_train))
     return config
+
+
+def _algorithm_name(config: AlgorithmConfig) -> str:
+    """"PPO", "SAC", ... for the config's algorithm or a subclass of one (`OverlappedPPO`)."""
+    cls = config.algo_class
+    if cls is None:
+        return type(config).__name__
+    return next((c.__name__ for c in cls.__mro__ if c.__name__ in SUPPORTED), cls.__name__)
 
 
 def _wants_fast_path(config: AlgorithmConfig, asor: AsorConfig) -> bool:

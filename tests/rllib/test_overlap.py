@@ -1,0 +1,104 @@
+"""OverlappedPPO: the env runners sample batch k+1 while the Learner trains on batch k."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.algorithms.sac import SACConfig
+
+import rllib_asor
+from rllib_asor.rllib.overlap import OverlappedPPO, overlap_sampling
+
+TAG = "overlap_sample"
+
+
+def _cartpole(runners: int = 1) -> PPOConfig:
+    return (
+        PPOConfig()
+        .environment("CartPole-v1")
+        .env_runners(num_env_runners=runners, num_envs_per_env_runner=2)
+        .training(train_batch_size=400, minibatch_size=100, num_epochs=2)
+        .debugging(seed=0)
+    )
+
+
+def _in_flight_during_updates(algo) -> list[int]:
+    """Run 3 iterations; per Learner update, the overlap's sample calls then in flight."""
+    seen: list[int] = []
+    update = algo.learner_group.update
+
+    def spy(*args, **kwargs):
+        seen.append(algo.env_runner_group.num_in_flight_async_reqs(TAG))
+        return update(*args, **kwargs)
+
+    algo.learner_group.update = spy
+    for _ in range(3):
+        result = algo.train()
+    assert result["num_env_steps_sampled_lifetime"] >= 3 * 400
+    return seen
+
+
+def test_runners_sample_the_next_batch_during_the_update(ray_session):
+    algo = overlap_sampling(_cartpole()).build_algo()
+    try:
+        assert isinstance(algo, OverlappedPPO)
+        assert _in_flight_during_updates(algo) == [1, 1, 1]
+    finally:
+        algo.stop()
+
+
+def test_switched_off_it_is_plain_ppo(ray_session):
+    algo = overlap_sampling(_cartpole(), enabled=False).build_algo()
+    try:
+        assert _in_flight_during_updates(algo) == [0, 0, 0]
+    finally:
+        algo.stop()
+
+
+def test_without_remote_runners_it_samples_in_the_driver(ray_session):
+    algo = overlap_sampling(_cartpole(runners=0)).build_algo()
+    try:
+        assert algo.env_runner_group.num_remote_workers() == 0
+        result = algo.train()
+        assert result["num_env_steps_sampled_lifetime"] >= 400
+    finally:
+        algo.stop()
+
+
+def test_learns_cartpole_and_restores_from_a_checkpoint(ray_session, tmp_path):
+    config = _cartpole().training(train_batch_size=1000, minibatch_size=250, num_epochs=6, lr=1e-3)
+    algo = overlap_sampling(config).build_algo()
+    try:
+        returns = [algo.train()["env_runners"]["episode_return_mean"] for _ in range(10)]
+        assert np.nanmax(returns[-3:]) > 3 * returns[0]  # random policy ≈ 20
+        path = algo.save(str(tmp_path / "ckpt")).checkpoint.path
+    finally:
+        algo.stop()
+    restored = OverlappedPPO.from_checkpoint(path)
+    try:
+        assert restored.train()["num_env_steps_sampled_lifetime"] > 10 * 1000
+    finally:
+        restored.stop()
+
+
+def test_with_asor_accepts_the_overlapped_config(ray_session):
+    config = rllib_asor.with_asor(
+        overlap_sampling(PPOConfig().environment("rllib_asor/LavaWorld-v0"))
+        .env_runners(num_env_runners=1, num_envs_per_env_runner=1)
+        .training(train_batch_size=200, minibatch_size=100, num_epochs=1),
+        seed=0,
+    )
+    algo = config.build_algo()
+    try:
+        assert isinstance(algo, OverlappedPPO)
+        result = algo.train()
+        result = algo.train()
+        assert np.isfinite(result["asor"]["aug_reward_mean"])
+    finally:
+        algo.stop()
+
+
+def test_only_ppo_configs_overlap():
+    with pytest.raises(ValueError, match="needs a PPO config"):
+        overlap_sampling(SACConfig().environment("Pendulum-v1"))
