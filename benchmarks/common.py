@@ -65,9 +65,11 @@ def run_method_seed_grid(
     seeds: Iterable[int],
     shared: dict[str, Any],
     out: Path,
+    cpus_per_trial: int = 1,
 ) -> None:
-    """One Tune trial (1 CPU) per (method, seed) whose `out/runs/<method>-<seed>.json` is
-    missing, so an interrupted benchmark resumes where it stopped.
+    """One Tune trial per (method, seed) whose `out/runs/<method>-<seed>.json` is missing, so
+    an interrupted benchmark resumes where it stopped. A trial holds `cpus_per_trial` CPUs: one
+    for itself, the rest for the env runners it starts.
 
     Each trial gets `{"spec": {"method", "asor", "seed", "args": shared, "out"}}`.
     """
@@ -85,7 +87,10 @@ def run_method_seed_grid(
     t0 = time.time()
     if specs:
         tune.Tuner(
-            tune.with_resources(trainable, {"cpu": 1}),
+            tune.with_resources(
+                trainable,
+                tune.PlacementGroupFactory([{"CPU": 1}] * cpus_per_trial),
+            ),
             param_space={"spec": tune.grid_search(specs)},
             run_config=tune.RunConfig(storage_path=str(out / "tune"), verbose=0),
         ).fit()

@@ -64,6 +64,14 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
         )
         .debugging(seed=seed)
     )
+    if getattr(args, "sampling", "local") == "overlap":
+        from rllib_asor.rllib.overlap import overlap_sampling
+
+        config = overlap_sampling(
+            config.env_runners(
+                num_env_runners=1, num_envs_per_env_runner=args.envs, num_cpus_per_env_runner=1
+            )
+        )
     if asor is not None:
         settings = {"seed": seed, "obs_keys": list(RACE_ASOR_OBS_KEYS)} | asor
         config = rllib_asor.with_asor(config, **settings)
@@ -212,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=8192, help="env steps per run")
     parser.add_argument("--batch", type=int, default=1024, help="train batch (env steps)")
     parser.add_argument("--epochs", type=int, default=4)
-    parser.add_argument("--envs", type=int, default=8, help="vectorised envs (local sampling)")
+    parser.add_argument("--envs", type=int, default=8, help="vectorised envs of the trial (or of its env runner)")
     parser.add_argument("--max-episode-steps", type=int, default=1000)
     parser.add_argument(
         "--train-map",
@@ -229,6 +237,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--eval-episodes", type=int, default=1, help="episodes per map")
     parser.add_argument("--greedy", action="store_true", help="evaluate the argmax policy")
+    parser.add_argument(
+        "--sampling",
+        choices=["local", "overlap"],
+        default="local",
+        help="local: sampling in the trial (1 CPU); overlap: one env runner sampling while the "
+        "Learner trains (OverlappedPPO, 2 CPUs per trial)",
+    )
     parser.add_argument("--parallel", type=int, default=3, help="trials at once (1 CPU each)")
     parser.add_argument("--out", default="benchmarks/out/race_learning")
     parser.add_argument("--summarize-only", action="store_true")
@@ -252,10 +267,16 @@ def main(argv: list[str] | None = None) -> int:
             "greedy",
             "train_map",
             "curriculum",
+            "sampling",
         )
         shared = {k: v for k, v in vars(args).items() if k in keys}
         run_method_seed_grid(
-            run_one, methods, range(args.first_seed, args.first_seed + args.seeds), shared, out
+            run_one,
+            methods,
+            range(args.first_seed, args.first_seed + args.seeds),
+            shared,
+            out,
+            cpus_per_trial=2 if args.sampling == "overlap" else 1,
         )
     md = summarize(out, names)
     print(md)

@@ -33,8 +33,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-LAYOUTS = {"local": (0, 16), "runners2": (2, 8)}
-"""Layout → (env runners, envs per runner)."""
+LAYOUTS = {
+    "local": (0, 16, False),
+    "runners2": (2, 8, False),
+    "overlap1": (1, 16, True),
+    "overlap2": (2, 8, True),
+}
+"""Layout → (env runners, envs per runner, overlapped sampling: rllib_asor/rllib/overlap.py)."""
 
 
 def measure_here(args: argparse.Namespace) -> dict[str, Any]:
@@ -44,8 +49,8 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
 
     from benchmarks.race_learning import race_config
 
-    torch.set_num_threads(1)
-    runners, envs = LAYOUTS[args.layout]
+    torch.set_num_threads(args.learner_threads)
+    runners, envs, overlap = LAYOUTS[args.layout]
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     ns = argparse.Namespace(
         steps=10**7, batch=1024, epochs=4, envs=envs, max_episode_steps=1000, train_map=None
@@ -54,8 +59,17 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
     config = race_config(0, asor, ns)
     if runners:
         config = config.env_runners(
-            num_env_runners=runners, num_envs_per_env_runner=envs, num_cpus_per_env_runner=0.5
+            num_env_runners=runners,
+            num_envs_per_env_runner=envs,
+            num_cpus_per_env_runner=1 / runners,
         )
+    if overlap:
+        try:
+            from rllib_asor.rllib.overlap import overlap_sampling
+        except ImportError:  # a tree from before it existed
+            ray.shutdown()
+            return {"unsupported": True}
+        config = overlap_sampling(config)
     algo = config.build_algo()
     for _ in range(args.warmup):
         algo.train()
@@ -87,6 +101,7 @@ def run_tree(tree: Path, layout: str, args: argparse.Namespace) -> dict[str, Any
     cmd = [
         sys.executable, __file__, "--single", "--layout", layout,
         "--iters", str(args.iters), "--warmup", str(args.warmup),
+        "--learner-threads", str(args.learner_threads),
     ] + (["--no-asor"] if args.no_asor else []) + (["--profile"] if args.profile else [])  # fmt: skip
     proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
     if proc.returncode != 0:
@@ -106,6 +121,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--iters", type=int, default=8, help="timed iterations (1024 steps each)")
     parser.add_argument("--warmup", type=int, default=2)
     parser.add_argument("--no-asor", action="store_true", help="plain PPO")
+    parser.add_argument(
+        "--learner-threads", type=int, default=1, help="torch threads of the driver (Learner)"
+    )
     parser.add_argument("--profile", action="store_true", help="print a cProfile of the timing")
     parser.add_argument("--out", default="benchmarks/out/race_speed")
     parser.add_argument("--single", action="store_true", help=argparse.SUPPRESS)
@@ -119,30 +137,32 @@ def main(argv: list[str] | None = None) -> int:
     for r in range(args.rounds):
         for layout in args.layouts:
             for tree in trees:
-                res = run_tree(tree, layout, args) | {
-                    "tree": str(tree),
-                    "layout": layout,
-                    "round": r,
-                }
-                rows.append(res)
-                print(f"round {r} {layout} {tree}: {res['env_steps_per_s']:.0f} env steps/s")
+                res = run_tree(tree, layout, args)
+                if res.get("unsupported"):
+                    continue
+                rows.append(res | {"tree": str(tree), "layout": layout, "round": r})
+                rate = res["env_steps_per_s"]
+                print(f"round {r} {layout} {tree}: {rate:.0f} env steps/s", flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+
+    def rates(tree: Path, layout: str) -> list[float]:
+        return [
+            x["env_steps_per_s"] for x in rows if x["tree"] == str(tree) and x["layout"] == layout
+        ]
+
+    # Every row against the first tree's best layout (its fastest median) of the same run.
+    base = max(statistics.median(v) for lay in args.layouts if (v := rates(trees[0], lay)))
     lines = [
-        "| tree | layout | env steps/s (median) | per round | ÷ first tree |",
+        "| tree | layout | env steps/s (median) | per round | ÷ first tree's best layout |",
         "|---|---|---|---|---|",
     ]
     for layout in args.layouts:
-        base = None
         for tree in trees:
-            rates = [
-                x["env_steps_per_s"]
-                for x in rows
-                if x["tree"] == str(tree) and x["layout"] == layout
-            ]
-            med = statistics.median(rates)
-            base = base or med
-            per = ", ".join(f"{v:.0f}" for v in rates)
+            if not (v := rates(tree, layout)):
+                continue
+            med = statistics.median(v)
+            per = ", ".join(f"{x:.0f}" for x in v)
             lines.append(f"| {tree.name} | {layout} | {med:.0f} | {per} | {med / base:.2f} |")
     md = "\n".join(lines) + "\n"
     meta = {"load_avg_after": os.getloadavg(), "args": vars(args), "rows": rows}
