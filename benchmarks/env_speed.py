@@ -1,6 +1,6 @@
 """Race env speed: env steps/s and the ratio to raw ``mj_step`` of the same model / frame_skip.
 
-    python benchmarks/env_speed.py [--steps 3000] [--repeats 3] [--maps 0 3 7 9] [--out benchmarks/out]
+    python benchmarks/env_speed.py [--steps 3000] [--repeats 3] [--maps 0 2 3 7 9] [--out benchmarks/out]
 
 For 1 racer (``gymnasium.make("game_env/ObstacleRace-v0")``, wrappers included) and 8 racers
 (``game_env.parallel_env``), random actions, resets included. Raw physics is ``mj_step`` on a
@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--steps", type=int, default=3000)
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--maps", type=int, nargs="+", default=[0, 3, 7, 9])
+    p.add_argument("--maps", type=int, nargs="+", default=[0, 2, 3, 7, 9])
     p.add_argument("--out", type=Path, default=Path("benchmarks/out"))
     args = p.parse_args(argv)
     rng = np.random.default_rng(0)

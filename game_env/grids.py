@@ -90,17 +90,16 @@ class CourseGrids:
         self.stacks = [self.buf[o : o + nr].reshape(num_racers, c, sh[0], width)[..., : sh[1]]
                        for o, nr, c, sh in zip(offs[:-1], rows, chans, shape, strict=True)]
         self.windows = sliding_window_view(self.buf, (GRID, GRID))
-        ny = np.array([sh[1] for sh in shape])
-        self.max_ix = np.array([sh[0] - GRID for sh in shape], np.intp)[:, None]
-        self.max_iy = (ny - GRID).astype(np.intp)[:, None]
         out = [(0, 0), (0, 1), (1, 0), (1, 1), (0, 2), (1, 2), (0, 3), (2, 0), (3, 0), (0, 4), (2, 1), (3, 1)]
         self.layer_of = np.array([lay for lay, _ in out])
+        # Per output channel (12): window-corner origin, 1 / cell size, largest corner, and the
+        # buffer row of each racer's plane; corners come out as (N, 2, 12) without transposes.
+        corner = self.origin + HALF * self.res  # (2, 4): origin of the window corner per layer
+        self.corner = corner[:, self.layer_of]  # (2, 12)
+        self.inv = self.inv_res[self.layer_of]  # (12,)
+        self.max_ij = (np.array(shape, np.intp).T - GRID)[:, self.layer_of]  # (2, 12)
         self.row_base = np.array([offs[lay] + (np.arange(num_racers) * chans[lay] + ch) * shape[lay][0]
-                                  for lay, ch in out], np.intp)  # (12, N)
-        self.origin3 = self.origin[:, :, None]  # (2, 4, 1)
-        self.corner3 = self.origin3 + HALF * self.res[None, :, None]  # origin of the window corner
-        self.inv3 = self.inv_res[None, :, None]
-        self.max_ij = np.stack((self.max_ix, self.max_iy))  # (2, 4, 1)
+                                  for lay, ch in out], np.intp).T.copy()  # (N, 12)
         self._fill_terrain()
         self.archive_state = np.zeros((num_racers, self.n_archives + 1), np.float32)
         self.goal_state = np.zeros((num_racers, len(goals_list := list(course.goals)) + 2), np.float32)
@@ -242,20 +241,22 @@ class CourseGrids:
         self, x: np.ndarray, y: np.ndarray, feet: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Batched grids for N racers: terrain (N,4,16,16), items (N,2,..), targets, goals (N,3,..)."""
-        out = self.observe_all(np.stack((x, y)), feet * 0.2)
+        out = self.observe_all(np.stack((x, y), axis=1), feet * 0.2)
         return out[:, 0:4], out[:, 4:6], out[:, 6:9], out[:, 9:12]
 
     def observe_all(self, xy: np.ndarray, feet5: np.ndarray) -> np.ndarray:
-        """All twelve grid channels (N, 12, 16, 16) from positions ``xy`` (2, N) and feet / 5 m.
+        """All twelve grid channels (N, 12, 16, 16) from positions ``xy`` (N, 2) and feet / 5 m (N,).
 
         Channels: terrain 0-3, items 4-5, targets 6-8, goals 9-11. One fancy index of the
         sliding-window view copies them all.
         """
-        ij = ((xy[:, None, :] - self.corner3) * self.inv3).astype(np.intp)  # window corners
-        _clip(ij, 0, self.max_ij, out=ij)  # (2, 4 layers, N)
-        ijl = ij[:, self.layer_of]  # (2, 12, N)
-        ijl[0] += self.row_base
-        out = self.windows[ijl[0].T, ijl[1].T]  # (N, 12, 16, 16)
+        ij = xy[:, :, None] - self.corner
+        ij *= self.inv
+        ij = ij.astype(np.intp)  # (N, 2, 12) window corners
+        _clip(ij, 0, self.max_ij, out=ij)
+        rows = ij[:, 0]
+        rows += self.row_base
+        out = self.windows[rows, ij[:, 1]]  # (N, 12, 16, 16)
         hts = out[:, 0:4:2]
         hts -= feet5.reshape(-1, 1, 1, 1)
         _clip(hts, -1.0, 1.0, out=hts)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import operator
 import warnings
 from typing import Any
 
@@ -103,7 +104,7 @@ def check_action(action: Any) -> list[int]:
                 vals = [int(v) for v in a.tolist()]
         except (TypeError, ValueError, OverflowError):
             vals = None
-    if vals is None or not all(0 <= v < n for v, n in zip(vals, _NVEC_LIST, strict=True)):
+    if vals is None or min(vals) < 0 or not all(map(operator.lt, vals, _NVEC_LIST)):
         raise ValueError(f"action {action!r} is outside the action space MultiDiscrete({_NVEC_LIST})")
     return vals
 

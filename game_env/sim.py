@@ -40,12 +40,13 @@ TRAPPED_S = 10.0  # no new best progress this long -> trapped
 WALL_STEPS = 25  # env steps pressing into a wall -> wall penalty
 DECAY = 0.05  # goal-distance shaping: potential exp(-DECAY * distance)
 R_TARGET, R_GOAL, R_DEST, R_FALL, R_STAY, R_TIME = 1.0, 0.3, 1.0, -1.0, -0.01, -0.02
-_BAD = (int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
-        int(mujoco.mjtWarning.mjWARN_BADQACC))
+_bad_warnings = operator.itemgetter(int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
+                                    int(mujoco.mjtWarning.mjWARN_BADQACC))
 _DIRS = [(math.cos(k * math.pi / 4), math.sin(k * math.pi / 4)) for k in range(8)]
 _S2 = math.sqrt(0.5)
 _agent_vector = operator.itemgetter(*AGENT_FEATURES)  # named features -> the vector's order
 _destination_vector = operator.itemgetter(*DESTINATION_FEATURES)
+assert DESTINATION_FEATURES[:3] == ("dx", "dy", "dz")  # the moving part; the rest is fixed per course
 
 
 class Racer:
@@ -101,6 +102,8 @@ class RaceSim:
         course, model, idx = load_scene(map_id, course_seed, self.n)
         self.course, self.model, self.idx = course, model, idx
         self.data = mujoco.MjData(model)
+        self.warnings = self.data.warning.number  # a live view
+        self.half_step = 0.5 * self.frame_skip * model.opt.timestep  # s
         self.grids = g = CourseGrids(course, self.n)
         self.hammers = Hammers(course, idx)
         self.tramps = Trampolines(course)
@@ -126,8 +129,9 @@ class RaceSim:
         self.arch_pos = [(z.cx, z.cy, z.z + FEET) for z in c.archives] + [(c.start[0], c.start[1], c.start[2] + FEET)]
         self.fall_z = c.floor_min - FALL_DEPTH
         self.inv_len = 2.0 / c.length
-        self.dest_static = {"yaw_sin": math.sin(d.yaw), "yaw_cos": math.cos(d.yaw), "tilt": 0.0,
-                            "size_x": d.hx / 10, "size_y": d.hy / 10, "size_z": 0.003}
+        dest_static = {"yaw_sin": math.sin(d.yaw), "yaw_cos": math.cos(d.yaw), "tilt": 0.0,
+                       "size_x": d.hx / 10, "size_y": d.hy / 10, "size_z": 0.003}
+        self.dest_tail = _destination_vector({"dx": 0.0, "dy": 0.0, "dz": 0.0, **dest_static})[3:]
         self.props = list(c.props)
         self.maps = (g.fine_h, g.belt_x, g.belt_y, g.tile_id, g.cliff)
         self.fine = (g.x_min, g.y_min, 1.0 / FINE, g.nx - 1, g.ny - 1)
@@ -172,8 +176,7 @@ class RaceSim:
         return np.array([r.success for r in self.racers])
 
     def _bad_count(self) -> int:
-        w = self.data.warning.number
-        return int(w[_BAD[0]] + w[_BAD[1]] + w[_BAD[2]])
+        return sum(_bad_warnings(self.warnings.tolist()))
 
     def _floor(self, pos: list[float], i: int) -> tuple[float, int, int]:
         x0, y0, inv, mx, my = self.fine
@@ -192,7 +195,7 @@ class RaceSim:
         """
         data = self.data
         t0 = data.time
-        half = 0.5 * self.frame_skip * self.model.opt.timestep
+        half = self.half_step
         ctrl = []
         if isinstance(actions, np.ndarray):
             actions = actions.tolist()
@@ -417,9 +420,12 @@ class RaceSim:
         """Potential-based shaping: change of exp(-DECAY * distance) to the goal the racer was
         heading for; the potential then moves on to the next goal."""
         gx, gy, gz = self.goal_pos[goal_before]
-        terms["goal_distance"] = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2)) - r.potential
-        gx, gy, gz = self.goal_pos[r.next_goal]
-        r.potential = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2))
+        phi = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2))
+        terms["goal_distance"] = phi - r.potential
+        if r.next_goal != goal_before:
+            gx, gy, gz = self.goal_pos[r.next_goal]
+            phi = math.exp(-DECAY * math.sqrt((gx - x) ** 2 + (gy - y) ** 2 + (gz - z) ** 2))
+        r.potential = phi
 
     def _wall(self, r: Racer, i: int, x: float, y: float, feet: float, vel: list[float], grounded: bool,
               t1: float, terms: dict[str, float]) -> None:
@@ -474,14 +480,11 @@ class RaceSim:
     def _observe(self, pos: list[float], vel: list[float], floors: list[float],
                  cliffs: list[float] | None = None) -> dict[str, np.ndarray]:
         """Batched observations: dict of (N, ...) float32 arrays (see ``game_env.spaces``)."""
-        n = self.n
-        p = np.array(pos).reshape(n, 3).T
-        grid = self.grids.observe_all(p[:2], (p[2] - FEET) * 0.2)
         t = self.data.time
         tf = self.steps / self.max_episode_steps
         ng = len(self.goal_pos) - 1
         cx, cy, cz = self.dest[:3]
-        rows = []
+        rows, feet5 = [], []
         for i, r in enumerate(self.racers):
             x, y, z = pos[3 * i: 3 * i + 3]
             vx, vy, vz = vel[3 * i: 3 * i + 3]
@@ -490,6 +493,7 @@ class RaceSim:
             gx, gy, gz = self.goal_pos[r.next_goal]
             gx, gy, gz = gx - x, gy - y, gz - z
             feet = z - FEET
+            feet5.append(feet * 0.2)
             fl = floors[i]
             agent = {
                 "progress_x": x * self.inv_len - 1.0,
@@ -525,8 +529,9 @@ class RaceSim:
                 "cooldown": max(r.ready_t - t, 0.0) / COOLDOWN,
                 "stay_fraction": (t - r.anchor_t) / STAY_S,
             }
-            dest = {"dx": (cx - x) * 0.01, "dy": (cy - y) * 0.01, "dz": (cz - feet) * 0.01, **self.dest_static}
-            rows.append(_agent_vector(agent) + _destination_vector(dest))
+            dest = ((cx - x) * 0.01, (cy - y) * 0.01, (cz - feet) * 0.01)  # dx, dy, dz
+            rows.append(_agent_vector(agent) + dest + self.dest_tail)
+        grid = self.grids.observe_all(np.array(pos).reshape(self.n, 3)[:, :2], np.array(feet5))
         vec = np.array(rows, np.float32)
         _clip(vec, -1.0, 1.0, out=vec)
         na = len(AGENT_FEATURES)
