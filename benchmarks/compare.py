@@ -2,7 +2,12 @@
 and a one-sided Mann–Whitney U p-value for "method > baseline" (unpaired, seeds pooled).
 
     python -m benchmarks.compare --runs benchmarks/out/lava --metric greedy_return_mean \\
-        --baseline ppo --methods asor asor-paper [--out table.md]
+        --baseline ppo --methods asor asor-paper [--out table.md] [--paired]
+
+`--paired` compares seed by seed (only seeds run by both): the CI of the mean per-seed
+difference and a one-sided Wilcoxon signed-rank p. Our benchmarks give a seed the same
+initial weights and the same stream of env dynamics for every method, so where that shared
+luck matters (Hopper: same-seed returns correlate at ~0.5) pairing narrows the interval.
 
 Reads every DIR/runs/*.json (fields "method", "seed" and the metric). `--metric` is a dotted
 path into a run file; a `*` part averages over all keys at that level, e.g. the race success
@@ -87,6 +92,47 @@ def compare(
     }
 
 
+def compare_paired(
+    baseline: dict[Any, float],
+    treatment: dict[Any, float],
+    *,
+    n_resamples: int = 9999,
+    seed: int = 0,
+) -> dict[str, float]:
+    """Seed-by-seed comparison over the seeds in both: diff = mean of (treatment − baseline),
+    its 95% percentile bootstrap CI over seeds, and the one-sided Wilcoxon signed-rank p for
+    treatment > baseline (1 when every difference is 0)."""
+    from scipy.stats import bootstrap, wilcoxon
+
+    seeds = sorted(set(baseline) & set(treatment), key=str)
+    if not seeds:
+        raise ValueError("compare_paired needs at least one seed run by both methods")
+    x = np.array([baseline[s] for s in seeds], dtype=float)
+    y = np.array([treatment[s] for s in seeds], dtype=float)
+    d = y - x
+    diff = float(d.mean())
+    if np.all(d == d[0]):
+        lo = hi = diff
+    else:
+        res = bootstrap(
+            (d,), np.mean, method="percentile", n_resamples=n_resamples,
+            rng=np.random.default_rng(seed),
+        )  # fmt: skip
+        lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    p = float(wilcoxon(d, alternative="greater").pvalue) if np.any(d != 0) else 1.0
+    return {
+        "n_pairs": len(seeds),
+        "mean_baseline": float(x.mean()),
+        "std_baseline": _std(x),
+        "mean_treatment": float(y.mean()),
+        "std_treatment": _std(y),
+        "diff": diff,
+        "ci_low": lo,
+        "ci_high": hi,
+        "p_value": p,
+    }
+
+
 def metric_value(run: dict[str, Any], path: str) -> float:
     """The value at dotted `path` in `run`; a `*` part is the mean over that level's values."""
     parts = path.split(".")
@@ -106,7 +152,12 @@ def metric_value(run: dict[str, Any], path: str) -> float:
 def load_metric(dirs: Sequence[Path], metric: str) -> dict[str, list[float]]:
     """method → metric values over its runs in every DIR/runs/*.json (a (method, seed) seen
     twice counts once; runs without a finite metric are skipped; both warned on stderr)."""
-    values: dict[str, list[float]] = {}
+    return {m: list(by_seed.values()) for m, by_seed in load_metric_by_seed(dirs, metric).items()}
+
+
+def load_metric_by_seed(dirs: Sequence[Path], metric: str) -> dict[str, dict[Any, float]]:
+    """method → {seed: metric value}, read like `load_metric`."""
+    values: dict[str, dict[Any, float]] = {}
     seen: set[tuple[str, Any]] = set()
     for d in dirs:
         for p in sorted(Path(d, "runs").glob("*.json")):
@@ -123,7 +174,7 @@ def load_metric(dirs: Sequence[Path], metric: str) -> dict[str, list[float]]:
                 print(f"warning: {p}: no finite {metric!r}, skipped", file=sys.stderr)
                 continue
             seen.add(key)
-            values.setdefault(run["method"], []).append(v)
+            values.setdefault(run["method"], {})[run.get("seed")] = v
     return values
 
 
@@ -157,6 +208,28 @@ def table(values: dict[str, list[float]], baseline: str, methods: Sequence[str])
     return "\n".join(lines) + "\n"
 
 
+def paired_table(values: dict[str, dict[Any, float]], baseline: str, methods: Sequence[str]) -> str:
+    """Markdown table of `compare_paired` for each method against the baseline."""
+    lines = [
+        "| method | seeds in both | baseline mean ± std | method mean ± std | Δ (paired) "
+        "| 95% CI of Δ | Wilcoxon p (one-sided, >) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    base = values.get(baseline, {})
+    for name in methods:
+        mine = values.get(name, {})
+        if not set(base) & set(mine):
+            lines.append(f"| {name} | 0 | – | – | – | – | – |")
+            continue
+        c = compare_paired(base, mine)
+        lines.append(
+            f"| {name} | {c['n_pairs']} | {c['mean_baseline']:.3f} ± {c['std_baseline']:.3f} "
+            f"| {c['mean_treatment']:.3f} ± {c['std_treatment']:.3f} | {c['diff']:+.3f} "
+            f"| [{c['ci_low']:+.3f}, {c['ci_high']:+.3f}] | {c['p_value']:.3g} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -168,14 +241,22 @@ def main(argv: list[str] | None = None) -> int:
         "--methods", nargs="+", default=None, help="default: every method found but the baseline"
     )
     parser.add_argument("--out", type=Path, default=None, help="also write the table here")
+    parser.add_argument("--paired", action="store_true", help="compare seed by seed")
     args = parser.parse_args(argv)
-    values = load_metric(args.runs, args.metric)
-    if args.baseline not in values:
+    by_seed = load_metric_by_seed(args.runs, args.metric)
+    if args.baseline not in by_seed:
         print(
             f"warning: no runs of baseline {args.baseline!r} with {args.metric!r}", file=sys.stderr
         )
-    methods = args.methods or sorted(m for m in values if m != args.baseline)
-    md = f"{args.metric}, vs {args.baseline}:\n\n" + table(values, args.baseline, methods)
+    methods = args.methods or sorted(m for m in by_seed if m != args.baseline)
+    if args.paired:
+        body = paired_table(by_seed, args.baseline, methods)
+    else:
+        values = {m: list(v.values()) for m, v in by_seed.items()}
+        body = table(values, args.baseline, methods)
+    md = (
+        f"{args.metric}, vs {args.baseline}{' (paired by seed)' if args.paired else ''}:\n\n" + body
+    )
     print(md)
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)

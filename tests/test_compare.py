@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.compare import compare, main, metric_value
+from benchmarks.compare import compare, compare_paired, main, metric_value
 
 
 def test_clearly_better_treatment() -> None:
@@ -33,6 +33,26 @@ def test_one_constant_or_single_sample() -> None:
     c = compare([0.6, 0.7, 0.8], [0.5, 0.5, 0.5], n_resamples=999)
     assert -0.3 - 1e-9 <= c["ci_low"] <= c["ci_high"] <= -0.1 + 1e-9
     assert c["p_value"] > 0.5
+
+
+def test_pairing_by_seed_removes_the_shared_seed_luck() -> None:
+    # Seeds differ a lot (shared luck); the treatment is +0.05 on every seed but one.
+    base = {0: 0.1, 1: 0.9, 2: 0.5, 3: 0.3, 4: 0.7, 5: 0.2, "x": 1.0}
+    treat = {0: 0.15, 1: 0.95, 2: 0.55, 3: 0.35, 4: 0.75, 5: 0.24, 9: 0.0}
+    c = compare_paired(base, treat, n_resamples=999)
+    assert c["n_pairs"] == 6  # seeds "x" and 9 are run by one method only
+    assert c["diff"] == pytest.approx((0.05 * 5 + 0.04) / 6)
+    assert 0 < c["ci_low"] <= c["diff"] <= c["ci_high"] < 0.06
+    assert c["p_value"] < 0.05
+    unpaired = compare([base[s] for s in range(6)], [treat[s] for s in range(6)], n_resamples=999)
+    assert unpaired["ci_low"] < 0 < unpaired["ci_high"]
+
+
+def test_paired_identical_runs_and_no_common_seed() -> None:
+    c = compare_paired({0: 1.0, 1: 2.0}, {0: 1.0, 1: 2.0})
+    assert c["diff"] == c["ci_low"] == c["ci_high"] == 0.0 and c["p_value"] == 1.0
+    with pytest.raises(ValueError, match="at least one seed"):
+        compare_paired({0: 1.0}, {1: 1.0})
 
 
 def test_metric_value_dotted_and_wildcard() -> None:
@@ -61,3 +81,17 @@ def test_cli_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
         assert name in printed
     assert out.read_text() in printed
     assert "nan" not in printed
+
+
+def test_cli_paired_table(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    runs = tmp_path / "hopper" / "runs"
+    runs.mkdir(parents=True)
+    for method, vs in {"ppo": [600.0, 700.0, 500.0], "asor": [610.0, 720.0, 505.0]}.items():
+        for seed, v in enumerate(vs):
+            run = {"method": method, "seed": seed, "eval_mean": v}
+            (runs / f"{method}-{seed}.json").write_text(json.dumps(run))
+    argv = ["--runs", str(tmp_path / "hopper"), "--metric", "eval_mean", "--paired"]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "paired by seed" in printed and "Wilcoxon" in printed
+    assert "| asor | 3 | 600.000 ± 100.000 | 611.667 ± 107.510 | +11.667 |" in printed
