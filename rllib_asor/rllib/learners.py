@@ -290,7 +290,7 @@ class AsorSACTorchLearner(FastSACLearnerMixin, _SoftQAsorMixin, SACTorchLearner)
         modules take one minibatch per call unless `aux_epochs` is set: a pass over the call's
         rows would train them on every SAC step, doubling its cost (docs/results.md)."""
         if getattr(self, "_fast_steps", False) and self.asor.aux_epochs is None:
-            return 1.0
+            return float(self.config.learner_config_dict[MINIBATCH_KEY])
         return super().aux_rows(module_id)
 
 
