@@ -9,16 +9,17 @@ then times `--iters` calls of `algo.train()` by the wall clock: env steps/s end 
 `--trees A B ...` measures each source tree (a checkout, e.g. `git worktree add /tmp/old <commit>`)
 in turn, `--rounds` times, interleaved (A, B, A, B, ...), so load drifts hit every tree alike;
 each process imports `benchmarks` and `rllib_asor` from its tree (PYTHONPATH), this file is the
-only code they share. Two layouts (`--layouts`): `local` (race_learning's: sampling in the
-driver, 16 envs, one core) and `runners2` (the quickstart YAML's: 2 env runners × 8 envs at 0.5
-CPU each, the learner in the driver).
+only code they share. Layouts (`--layouts`, `LAYOUTS`): `local` (race_learning's: sampling in
+the driver, 16 envs, one core), `runners2` (the race YAMLs': 2 env runners × 8 envs at 0.5 CPU
+each), `overlap1` / `overlap2` (1 × 16 or 2 × 8 with `OverlappedPPO`; skipped for trees
+without it).
 
     git worktree add /tmp/race-old fb9d406
     python benchmarks/race_speed.py --trees /tmp/race-old . --rounds 3 --out benchmarks/out/race_speed
     python benchmarks/race_speed.py --trees . --profile --layouts local   # cProfile, one process
 
 Writes OUT/race_speed.json (every measurement) and prints a markdown table (median env steps/s
-per tree and layout, and each tree's ratio to the first one).
+per tree and layout, and its ratio to the first tree's fastest layout).
 """
 
 from __future__ import annotations

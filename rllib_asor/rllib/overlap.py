@@ -65,8 +65,6 @@ class OverlappedPPO(PPO):
     """RLlib's PPO; with `learner_config_dict["overlap_sampling"]` its remote env runners sample
     batch k+1 while the Learner trains on batch k (module docstring)."""
 
-    _in_flight = 0
-
     def training_step(self) -> None:
         group = self.env_runner_group
         if (
@@ -78,7 +76,7 @@ class OverlappedPPO(PPO):
             return super().training_step()
 
         with self.metrics.log_time((TIMERS, ENV_RUNNER_SAMPLING_TIMER)):
-            if not self._in_flight:  # first iteration (or after a restore/failure)
+            if not group.num_in_flight_async_reqs(_TAG):  # first iteration, restore, failure
                 self._launch()
             episodes, runner_metrics = self._collect()
             self._launch()  # the next batch, with the weights the runners hold now
@@ -127,7 +125,7 @@ class OverlappedPPO(PPO):
 
     def _launch(self) -> None:
         """Ask every healthy remote env runner for one sample call (its share of the batch)."""
-        self._in_flight = self.env_runner_group.foreach_env_runner_async(
+        self.env_runner_group.foreach_env_runner_async(
             lambda runner: (runner.sample(), runner.get_metrics()), tag=_TAG
         )
 
@@ -146,5 +144,4 @@ class OverlappedPPO(PPO):
                 metrics.append(m)
             if deadline is not None and time.monotonic() >= deadline:
                 break
-        self._in_flight = 0
         return episodes, metrics
