@@ -40,6 +40,24 @@ DEFAULT_METHODS = (
     "asor:mode=asor",
 )
 """PPO, the published SRPO and ASOR (`preset=paper`), and ASOR's robust default."""
+
+
+def model_config_arg(text: str) -> str:
+    """argparse type of `--model-config`: JSON of valid race network settings, kept as text."""
+    from rllib_asor.models.race_net import DEFAULTS, race_net_settings
+
+    try:
+        settings = json.loads(text)
+        if not isinstance(settings, dict):
+            raise ValueError(f"a JSON object is needed, got {type(settings).__name__}")
+        if unknown := sorted(set(settings) - set(DEFAULTS)):
+            raise ValueError(f"unknown keys {unknown}: allowed {sorted(DEFAULTS)}")
+        race_net_settings(settings)
+    except ValueError as err:  # json.JSONDecodeError is a ValueError
+        raise argparse.ArgumentTypeError(f"{text!r}: {err}") from None
+    return text
+
+
 def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace) -> Any:
     """The shared PPO config (identical for every method), plus ASOR when given."""
     import rllib_asor
@@ -51,6 +69,9 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
             map_id=getattr(args, "train_map", None),
             max_episode_steps=args.max_episode_steps,
             curriculum=json.loads(args.curriculum) if getattr(args, "curriculum", None) else None,
+            model_config=json.loads(args.model_config)
+            if getattr(args, "model_config", None)
+            else None,
         )
         .env_runners(num_env_runners=0, num_envs_per_env_runner=args.envs)
         .training(
@@ -220,7 +241,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=8192, help="env steps per run")
     parser.add_argument("--batch", type=int, default=1024, help="train batch (env steps)")
     parser.add_argument("--epochs", type=int, default=4)
-    parser.add_argument("--envs", type=int, default=8, help="vectorised envs of the trial (or of its env runner)")
+    parser.add_argument(
+        "--envs", type=int, default=8, help="vectorised envs of the trial (or of its env runner)"
+    )
     parser.add_argument("--max-episode-steps", type=int, default=1000)
     parser.add_argument(
         "--train-map",
@@ -234,6 +257,13 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help='a map curriculum as JSON, e.g. \'{"stages": [[2, 6], "random"], "threshold": 0.5}\' '
         "(rllib_asor.rllib.curriculum.MapCurriculum); evaluation is always on all ten maps",
+    )
+    parser.add_argument(
+        "--model-config",
+        type=model_config_arg,
+        default=None,
+        help='race network settings as JSON, e.g. \'{"cnn_channels": [8, 16], "attn_token_size": 8}\' '
+        "(rllib_asor.models.race_net.DEFAULTS); default: the network of the tuned examples",
     )
     parser.add_argument("--eval-episodes", type=int, default=1, help="episodes per map")
     parser.add_argument("--greedy", action="store_true", help="evaluate the argmax policy")
@@ -268,6 +298,7 @@ def main(argv: list[str] | None = None) -> int:
             "train_map",
             "curriculum",
             "sampling",
+            "model_config",
         )
         shared = {k: v for k, v in vars(args).items() if k in keys}
         run_method_seed_grid(

@@ -12,14 +12,15 @@ each process imports `benchmarks` and `rllib_asor` from its tree (PYTHONPATH), t
 only code they share. Layouts (`--layouts`, `LAYOUTS`): `local` (race_learning's: sampling in
 the driver, 16 envs, one core), `runners2` (the race YAMLs': 2 env runners × 8 envs at 0.5 CPU
 each), `overlap1` / `overlap2` (1 × 16 or 2 × 8 with `OverlappedPPO`; skipped for trees
-without it).
+without it). Networks (`--nets`, `NETS`): `default` (the tuned examples') and `small`.
 
     git worktree add /tmp/race-old fb9d406
     python benchmarks/race_speed.py --trees /tmp/race-old . --rounds 3 --out benchmarks/out/race_speed
+    python benchmarks/race_speed.py --trees /tmp/race-old . --layouts runners2 overlap1 --nets default small
     python benchmarks/race_speed.py --trees . --profile --layouts local   # cProfile, one process
 
 Writes OUT/race_speed.json (every measurement) and prints a markdown table (median env steps/s
-per tree and layout, and its ratio to the first tree's fastest layout).
+per tree, layout and network, and its ratio to the first tree's fastest).
 """
 
 from __future__ import annotations
@@ -42,6 +43,13 @@ LAYOUTS = {
 }
 """Layout → (env runners, envs per runner, overlapped sampling: rllib_asor/rllib/overlap.py)."""
 
+NETS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "small": {"cnn_channels": [8, 16], "attn_token_size": 8},
+}
+"""Race network → `model_config` over `RaceNetModule`'s defaults. `small`: half the CNN channels
+and half as many attention tokens (its success rate: docs/results.md, issue 11)."""
+
 
 def measure_here(args: argparse.Namespace) -> dict[str, Any]:
     """Build the race PPO(+ASOR) config of the tree on sys.path and time `--iters` iterations."""
@@ -58,6 +66,9 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
     )
     asor = None if args.no_asor else {"mode": "asor"}
     config = race_config(0, asor, ns)
+    if NETS[args.net]:  # set on the module spec, so that trees without --model-config work too
+        spec = config.rl_module_spec
+        spec.model_config = {**(spec.model_config or {}), **NETS[args.net]}
     if runners:
         config = config.env_runners(
             num_env_runners=runners,
@@ -96,11 +107,11 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
     return {"env_steps": steps, "wall_s": wall, "env_steps_per_s": steps / wall}
 
 
-def run_tree(tree: Path, layout: str, args: argparse.Namespace) -> dict[str, Any]:
+def run_tree(tree: Path, layout: str, net: str, args: argparse.Namespace) -> dict[str, Any]:
     """One measurement in a fresh process that imports from `tree`."""
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1", "PYTHONHASHSEED": "0"}
     cmd = [
-        sys.executable, __file__, "--single", "--layout", layout,
+        sys.executable, __file__, "--single", "--layout", layout, "--nets", net,
         "--iters", str(args.iters), "--warmup", str(args.warmup),
         "--learner-threads", str(args.learner_threads),
     ] + (["--no-asor"] if args.no_asor else []) + (["--profile"] if args.profile else [])  # fmt: skip
@@ -118,6 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--trees", nargs="+", default=["."], help="source trees to compare")
     parser.add_argument("--layouts", nargs="+", choices=list(LAYOUTS), default=list(LAYOUTS))
+    parser.add_argument("--nets", nargs="+", choices=list(NETS), default=["default"])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--iters", type=int, default=8, help="timed iterations (1024 steps each)")
     parser.add_argument("--warmup", type=int, default=2)
@@ -130,41 +142,47 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--single", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--layout", default="local", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    args.net = args.nets[0]
     if args.single:
         print(json.dumps(measure_here(args)))
         return 0
     trees = [Path(t).resolve() for t in args.trees]
     rows: list[dict[str, Any]] = []
+    combos = [(lay, net) for lay in args.layouts for net in args.nets]
     for r in range(args.rounds):
-        for layout in args.layouts:
+        for layout, net in combos:
             for tree in trees:
-                res = run_tree(tree, layout, args)
+                res = run_tree(tree, layout, net, args)
                 if res.get("unsupported"):
                     continue
-                rows.append(res | {"tree": str(tree), "layout": layout, "round": r})
+                rows.append(res | {"tree": str(tree), "layout": layout, "net": net, "round": r})
                 rate = res["env_steps_per_s"]
-                print(f"round {r} {layout} {tree}: {rate:.0f} env steps/s", flush=True)
+                print(f"round {r} {layout} {net} {tree}: {rate:.0f} env steps/s", flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
-    def rates(tree: Path, layout: str) -> list[float]:
+    def rates(tree: Path, layout: str, net: str) -> list[float]:
         return [
-            x["env_steps_per_s"] for x in rows if x["tree"] == str(tree) and x["layout"] == layout
+            x["env_steps_per_s"]
+            for x in rows
+            if (x["tree"], x["layout"], x["net"]) == (str(tree), layout, net)
         ]
 
     # Every row against the first tree's best layout (its fastest median) of the same run.
-    base = max(statistics.median(v) for lay in args.layouts if (v := rates(trees[0], lay)))
+    base = max(statistics.median(v) for lay, net in combos if (v := rates(trees[0], lay, net)))
     lines = [
-        "| tree | layout | env steps/s (median) | per round | ÷ first tree's best layout |",
-        "|---|---|---|---|---|",
+        "| tree | layout | net | env steps/s (median) | per round | ÷ first tree's best |",
+        "|---|---|---|---|---|---|",
     ]
-    for layout in args.layouts:
+    for layout, net in combos:
         for tree in trees:
-            if not (v := rates(tree, layout)):
+            if not (v := rates(tree, layout, net)):
                 continue
             med = statistics.median(v)
             per = ", ".join(f"{x:.0f}" for x in v)
-            lines.append(f"| {tree.name} | {layout} | {med:.0f} | {per} | {med / base:.2f} |")
+            lines.append(
+                f"| {tree.name} | {layout} | {net} | {med:.0f} | {per} | {med / base:.2f} |"
+            )
     md = "\n".join(lines) + "\n"
     meta = {"load_avg_after": os.getloadavg(), "args": vars(args), "rows": rows}
     (out / "race_speed.json").write_text(json.dumps(meta, indent=1))
