@@ -92,17 +92,14 @@ def compare(
     }
 
 
-def compare_paired(
-    baseline: dict[Any, float],
-    treatment: dict[Any, float],
-    *,
-    n_resamples: int = 9999,
-    seed: int = 0,
-) -> dict[str, float]:
+def compare_paired(baseline: dict[Any, float], treatment: dict[Any, float]) -> dict[str, float]:
     """Seed-by-seed comparison over the seeds in both: diff = mean of (treatment − baseline),
-    its 95% percentile bootstrap CI over seeds, and the one-sided Wilcoxon signed-rank p for
+    its 95% interval over seeds (`rllib_asor.report.stats.bootstrap_ci`, the project's BCa
+    interval of a mean; NaN for one pair), and the one-sided Wilcoxon signed-rank p for
     treatment > baseline (1 when every difference is 0)."""
-    from scipy.stats import bootstrap, wilcoxon
+    from scipy.stats import wilcoxon
+
+    from rllib_asor.report.stats import bootstrap_ci
 
     seeds = sorted(set(baseline) & set(treatment), key=str)
     if not seeds:
@@ -111,14 +108,7 @@ def compare_paired(
     y = np.array([treatment[s] for s in seeds], dtype=float)
     d = y - x
     diff = float(d.mean())
-    if np.all(d == d[0]):
-        lo = hi = diff
-    else:
-        res = bootstrap(
-            (d,), np.mean, method="percentile", n_resamples=n_resamples,
-            rng=np.random.default_rng(seed),
-        )  # fmt: skip
-        lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    lo, hi = bootstrap_ci(d)
     p = float(wilcoxon(d, alternative="greater").pvalue) if np.any(d != 0) else 1.0
     return {
         "n_pairs": len(seeds),

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from benchmarks.compare import compare, compare_paired, main, metric_value
+from rllib_asor.report.stats import bootstrap_ci
 
 
 def test_clearly_better_treatment() -> None:
@@ -39,7 +40,7 @@ def test_pairing_by_seed_removes_the_shared_seed_luck() -> None:
     # Seeds differ a lot (shared luck); the treatment is +0.05 on every seed but one.
     base = {0: 0.1, 1: 0.9, 2: 0.5, 3: 0.3, 4: 0.7, 5: 0.2, "x": 1.0}
     treat = {0: 0.15, 1: 0.95, 2: 0.55, 3: 0.35, 4: 0.75, 5: 0.24, 9: 0.0}
-    c = compare_paired(base, treat, n_resamples=999)
+    c = compare_paired(base, treat)
     assert c["n_pairs"] == 6  # seeds "x" and 9 are run by one method only
     assert c["diff"] == pytest.approx((0.05 * 5 + 0.04) / 6)
     assert 0 < c["ci_low"] <= c["diff"] <= c["ci_high"] < 0.06
@@ -53,6 +54,16 @@ def test_paired_identical_runs_and_no_common_seed() -> None:
     assert c["diff"] == c["ci_low"] == c["ci_high"] == 0.0 and c["p_value"] == 1.0
     with pytest.raises(ValueError, match="at least one seed"):
         compare_paired({0: 1.0}, {1: 1.0})
+
+
+def test_paired_interval_is_the_projects_interval_of_the_differences() -> None:
+    base = {s: v for s, v in enumerate([0.2, 0.0, 0.7, 0.9, 0.1, 0.6, 0.3, 0.8])}
+    treat = {s: v for s, v in enumerate([0.5, 0.1, 0.6, 0.9, 0.0, 0.8, 0.7, 0.6])}
+    c = compare_paired(base, treat)
+    diffs = [treat[s] - base[s] for s in base]
+    assert (c["ci_low"], c["ci_high"]) == bootstrap_ci(diffs)
+    one = compare_paired({0: 0.2}, {0: 0.5})  # one pair: no spread to resample
+    assert one["diff"] == pytest.approx(0.3) and math.isnan(one["ci_low"])
 
 
 def test_metric_value_dotted_and_wildcard() -> None:
