@@ -274,7 +274,12 @@ def main(argv: list[str] | None = None) -> int:
         help="local: sampling in the trial (1 CPU); overlap: one env runner sampling while the "
         "Learner trains (OverlappedPPO, 2 CPUs per trial)",
     )
-    parser.add_argument("--parallel", type=int, default=3, help="trials at once (1 CPU each)")
+    parser.add_argument(
+        "--parallel",
+        type=int,
+        default=3,
+        help="trials at once (1 CPU each, 2 with --sampling overlap)",
+    )
     parser.add_argument("--out", default="benchmarks/out/race_learning")
     parser.add_argument("--summarize-only", action="store_true")
     args = parser.parse_args(argv)
@@ -286,7 +291,8 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.time()
         reference_rows(out, args)
         print(f"reference rows in {time.time() - t0:.0f} s", flush=True)
-        start_local_ray(args.parallel)
+        cpus_per_trial = 2 if args.sampling == "overlap" else 1
+        start_local_ray(args.parallel * cpus_per_trial)
         keys = (
             "steps",
             "batch",
@@ -307,7 +313,7 @@ def main(argv: list[str] | None = None) -> int:
             range(args.first_seed, args.first_seed + args.seeds),
             shared,
             out,
-            cpus_per_trial=2 if args.sampling == "overlap" else 1,
+            cpus_per_trial=cpus_per_trial,
         )
     md = summarize(out, names)
     print(md)
