@@ -55,6 +55,7 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
     """Build the race PPO(+ASOR) config of the tree on sys.path and time `--iters` iterations."""
     import ray
     import torch
+    from ray.rllib.core import DEFAULT_MODULE_ID
 
     from benchmarks.race_learning import race_config
 
@@ -65,10 +66,16 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
         steps=10**7, batch=1024, epochs=4, envs=envs, max_episode_steps=1000, train_map=None
     )
     asor = None if args.no_asor else {"mode": "asor"}
+    if net := NETS[args.net]:  # through race_ppo_config, which every tree's race_config calls
+        import rllib_asor.rllib.race as race
+
+        base_config = race.race_ppo_config
+
+        def race_ppo_config(*a: Any, **kw: Any) -> Any:
+            return base_config(*a, **kw | {"model_config": (kw.get("model_config") or {}) | net})
+
+        race.race_ppo_config = race_ppo_config
     config = race_config(0, asor, ns)
-    if NETS[args.net]:  # set on the module spec, so that trees without --model-config work too
-        spec = config.rl_module_spec
-        spec.model_config = {**(spec.model_config or {}), **NETS[args.net]}
     if runners:
         config = config.env_runners(
             num_env_runners=runners,
@@ -83,6 +90,8 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
             return {"unsupported": True}
         config = overlap_sampling(config)
     algo = config.build_algo()
+    learner_net = algo.learner_group._learner.module[DEFAULT_MODULE_ID].settings
+    assert all(learner_net[k] == v for k, v in NETS[args.net].items()), learner_net
     for _ in range(args.warmup):
         algo.train()
     steps0 = algo.train()["num_env_steps_sampled_lifetime"]

@@ -245,6 +245,20 @@ class RaceNetModule(TorchRLModule, ValueFunctionAPI):
         return self.action_dist_cls
 
     # ------------------------------------------------------------------ forward passes
+    def forward_exploration(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        """Acting: RLlib's version toggles eval()/train() around every call, a walk over the
+        module's ~80 submodules that cost ~10 % of the race's sampling. No layer here depends
+        on the mode (no dropout or batch norm), so an acting module switches to eval once."""
+        if self.training:
+            self.eval()
+        return self._forward_exploration(batch, **kwargs)
+
+    def forward_inference(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        """Greedy acting; eval mode once, as `forward_exploration`."""
+        if self.training:
+            self.eval()
+        return self._forward_inference(batch, **kwargs)
+
     def logits(self, embeddings: torch.Tensor) -> torch.Tensor:
         """Concatenated logits of the action heads [B, sum(nvec)]."""
         h = self.pi_trunk(embeddings)

@@ -60,6 +60,21 @@ def test_forward_gives_valid_actions_for_all_eight_heads_and_values_of_shape_b(e
     assert values.shape == (B,) and torch.isfinite(values).all()
 
 
+def test_acting_switches_to_eval_once_and_training_switches_back(env):
+    module = build(env)
+    batch = {Columns.OBS: obs_batch(env)}
+    assert module.training  # a new torch module trains
+    trained = module.forward_train(batch)[Columns.ACTION_DIST_INPUTS]
+    acted = module.forward_exploration(batch)[Columns.ACTION_DIST_INPUTS]
+    assert not module.training and not any(m.training for m in module.modules())
+    # Same weights, same logits: the mode changes no result (attention's fused path only).
+    torch.testing.assert_close(acted, trained.detach(), rtol=1e-4, atol=1e-5)
+    module.forward_inference(batch)
+    assert not module.training
+    module.forward_train(batch)
+    assert module.training and all(m.training for m in module.modules())
+
+
 @pytest.mark.parametrize("share", [True, False])
 def test_gradients_reach_every_parameter(env, share):
     module = build(env, vf_share_encoders=share)
