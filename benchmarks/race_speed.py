@@ -109,7 +109,9 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
         import pstats
 
         prof.disable()
-        pstats.Stats(prof).sort_stats("cumulative").print_stats(45)
+        stats = pstats.Stats(prof)
+        stats.sort_stats("cumulative").print_stats(45)
+        stats.sort_stats("tottime").print_stats(30)
     steps = result["num_env_steps_sampled_lifetime"] - steps0
     algo.stop()
     ray.shutdown()

@@ -319,3 +319,26 @@ def test_robust_ppo_with_the_ensemble_proxy_still_fills_the_archive(ray_session)
         assert np.isfinite(asor["ensemble_loss"])
     finally:
         algo.stop()
+
+
+def test_nan_gradients_are_zeroed_with_one_check_as_rllib_does(ray_session, caplog):
+    algo = lava_ppo().build_algo()
+    try:
+        learner = algo.learner_group._learner
+        assert learner._check_gradients_once and learner.config.torch_skip_nan_gradients
+        params = learner._params
+        before = {pid: p.detach().clone() for pid, p in params.items()}
+        grads = {pid: torch.full_like(p, 0.5) for pid, p in params.items()}
+        bad = next(iter(grads))
+        grads[bad][..., 0] = float("nan")
+        with caplog.at_level("WARNING"):
+            learner.apply_gradients(grads)
+        assert "nan/inf" in caplog.text
+        assert torch.isfinite(params[bad].grad).all() and (params[bad].grad[..., 0] == 0).all()
+        assert all(torch.isfinite(p).all() for p in params.values())
+        assert all(not torch.equal(before[pid], p) for pid, p in params.items())  # all stepped
+        caplog.clear()
+        learner.apply_gradients({pid: torch.full_like(p, 0.5) for pid, p in params.items()})
+        assert "nan/inf" not in caplog.text
+    finally:
+        algo.stop()
