@@ -122,7 +122,7 @@ def run_tree(tree: Path, layout: str, net: str, args: argparse.Namespace) -> dic
     """One measurement in a fresh process that imports from `tree`."""
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1", "PYTHONHASHSEED": "0"}
     cmd = [
-        sys.executable, __file__, "--single", "--layout", layout, "--nets", net,
+        sys.executable, __file__, "--single", "--layout", layout, "--net", net,
         "--iters", str(args.iters), "--warmup", str(args.warmup),
         "--learner-threads", str(args.learner_threads),
     ] + (["--no-asor"] if args.no_asor else []) + (["--profile"] if args.profile else [])  # fmt: skip
@@ -152,8 +152,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="benchmarks/out/race_speed")
     parser.add_argument("--single", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--layout", default="local", help=argparse.SUPPRESS)
+    parser.add_argument("--net", default="default", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    args.net = args.nets[0]
     if args.single:
         print(json.dumps(measure_here(args)))
         return 0
