@@ -59,6 +59,34 @@ def mean_std(xs: Sequence[float]) -> str:
     return f"{np.mean(xs):.1f} ± {sd:.1f}"
 
 
+def runs_made_otherwise(
+    out: Path,
+    names: Iterable[str],
+    seeds: Iterable[int],
+    settings: dict[str, Any],
+    defaults: dict[str, Any] | None = None,
+) -> list[str]:
+    """Run files OUT/runs/<method>-<seed>.json that exist and record other `settings` than
+    these. A rerun keeps finished runs, so without this check one folder could silently mix
+    settings. A key a file lacks counts as `defaults[key]`, or is not compared."""
+    import json
+
+    defaults = defaults or {}
+    clash = []
+    for name in names:
+        for seed in seeds:
+            path = out / "runs" / f"{name}-{seed}.json"
+            if not path.exists():
+                continue
+            run = json.loads(path.read_text())
+            for key, want in settings.items():
+                if key in run or key in defaults:
+                    if run.get(key, defaults.get(key)) != want:
+                        clash.append(f"{path.name} ({key}={run.get(key, defaults.get(key))!r})")
+                        break
+    return clash
+
+
 def run_method_seed_grid(
     trainable: Callable[[dict[str, Any]], Any],
     methods: Iterable[tuple[str, dict[str, Any] | None]],

@@ -27,7 +27,12 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import run_method_seed_grid, start_local_ray, write_json
+from benchmarks.common import (
+    run_method_seed_grid,
+    runs_made_otherwise,
+    start_local_ray,
+    write_json,
+)
 from rllib_asor.report.stats import bootstrap_ci
 
 DEFAULT_METHODS = (
@@ -322,14 +327,9 @@ def main(argv: list[str] | None = None) -> int:
     names = [n for n, _ in methods]
     if not args.summarize_only:
         seeds = range(args.first_seed, args.first_seed + args.seeds)
-        clash = [
-            p.name
-            for n in names
-            for s in seeds
-            if (p := out / "runs" / f"{n}-{s}.json").exists()
-            and json.loads(p.read_text()).get("layout", "B") != args.layout
-        ]
-        if clash:
+        if clash := runs_made_otherwise(
+            out, names, seeds, {"layout": args.layout}, defaults={"layout": "B"}
+        ):
             parser.error(
                 f"{out}/runs holds runs of another layout ({', '.join(clash)}): use another --out"
             )

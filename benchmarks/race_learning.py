@@ -13,7 +13,8 @@ Methods are named as in `benchmarks.lava_reproduction` (`name:key=value,...` ove
 fields; `ppo` = no ASOR). ASOR and SRPO see `RACE_ASOR_OBS_KEYS` unless `obs_keys` is given.
 Seeds are `--first-seed` .. `--first-seed + --seeds - 1`. Each run is written to
 OUT/runs/<method>-<seed>.json as soon as it finishes; existing run files are kept (a rerun
-only adds what is missing); the success rate is `eval.per_map.<map>.success` in them
+only adds what is missing; one with another `--sampling` or `--model-config` than a kept run
+recorded is refused); the success rate is `eval.per_map.<map>.success` in them
 (`python -m benchmarks.compare --metric 'eval.per_map.*.success'` averages over the maps);
 `--summarize-only` rebuilds the tables.
 """
@@ -29,7 +30,12 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import run_method_seed_grid, start_local_ray, write_json
+from benchmarks.common import (
+    run_method_seed_grid,
+    runs_made_otherwise,
+    start_local_ray,
+    write_json,
+)
 from benchmarks.lava_reproduction import parse_method
 from rllib_asor.evaluation.race import COLUMNS, evaluate, module_policy
 
@@ -56,6 +62,16 @@ def model_config_arg(text: str) -> str:
     except ValueError as err:  # json.JSONDecodeError is a ValueError
         raise argparse.ArgumentTypeError(f"{text!r}: {err}") from None
     return text
+
+
+def run_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """What a run file records besides method and seed, so that a rerun into the same folder
+    with other settings is refused rather than mixed in (`--model-config` as parsed JSON)."""
+    model_config = getattr(args, "model_config", None)
+    return {
+        "sampling": getattr(args, "sampling", "local"),
+        "model_config": json.loads(model_config) if model_config else {},
+    }
 
 
 def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace) -> Any:
@@ -157,6 +173,7 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
     final = {
         "method": spec["method"],
         "seed": spec["seed"],
+        **run_settings(args),
         "steps": steps,
         "train_wall_s": train_s,
         "eval_wall_s": time.time() - t1,
@@ -287,6 +304,12 @@ def main(argv: list[str] | None = None) -> int:
     methods = [parse_method(m) for m in args.methods]
     names = [n for n, _ in methods]
     if not args.summarize_only:
+        seeds = range(args.first_seed, args.first_seed + args.seeds)
+        if clash := runs_made_otherwise(out, names, seeds, run_settings(args)):
+            parser.error(
+                f"{out}/runs holds runs made with other settings ({', '.join(clash)}): "
+                "use another --out or another method name"
+            )
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         t0 = time.time()
         reference_rows(out, args)
@@ -310,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
         run_method_seed_grid(
             run_one,
             methods,
-            range(args.first_seed, args.first_seed + args.seeds),
+            seeds,
             shared,
             out,
             cpus_per_trial=cpus_per_trial,

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from benchmarks.common import runs_made_otherwise, write_json
 from benchmarks.race_learning import main, race_config
 
 SMALL = '{"cnn_channels": [8, 16], "attn_token_size": 8}'
@@ -37,3 +38,26 @@ def test_bad_model_config_is_a_usage_error(
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert "--model-config" in err and named in err
+
+
+def test_rerun_with_other_settings_into_the_same_folder_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    write_json(
+        tmp_path / "runs" / "ppo-0.json", {"method": "ppo", "seed": 0, "sampling": "overlap"}
+    )
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--methods", "ppo", "--seeds", "1", "--out", str(tmp_path)])
+    assert exit_info.value.code == 2
+    assert "ppo-0.json (sampling='overlap')" in capsys.readouterr().err
+
+
+def test_runs_made_otherwise_compares_recorded_keys_and_defaults(tmp_path: Path) -> None:
+    write_json(tmp_path / "runs" / "a-0.json", {"layout": "E"})
+    write_json(tmp_path / "runs" / "a-1.json", {})  # written before the key was recorded
+    write_json(tmp_path / "runs" / "a-2.json", {"layout": "B"})
+    assert runs_made_otherwise(tmp_path, ["a"], range(4), {"layout": "B"}) == [
+        "a-0.json (layout='E')"
+    ]
+    with_default = runs_made_otherwise(tmp_path, ["a"], range(4), {"layout": "E"}, {"layout": "B"})
+    assert with_default == ["a-1.json (layout='B')", "a-2.json (layout='B')"]
