@@ -158,7 +158,13 @@ def test_srpo_mode_builds_no_proxy(ray_session):
 
 @pytest.mark.parametrize(
     "bad",
-    [{"rho_value": 0.0}, {"lambda_": -1.0}, {"proxy": "counts"}, {"aux_epochs": 0}, {"aux_epochs": "1"}],
+    [
+        {"rho_value": 0.0},
+        {"lambda_": -1.0},
+        {"proxy": "counts"},
+        {"aux_epochs": 0},
+        {"aux_epochs": "1"},
+    ],
 )
 def test_with_asor_rejects_bad_settings(bad):
     with pytest.raises(ValueError, match="allowed"):
@@ -265,8 +271,14 @@ def test_robust_checkpoint_restores_the_archive_and_normalisers(robust, tmp_path
     restored = Algorithm.from_checkpoint(str(tmp_path))
     try:
         got = aux_state(restored)
-        for k in ("state.archive.features", "state.archive.returns", "state.bonus_rms.mean",
-                  "state.reward_rms.var", "state.critic_ready", "state.disc.input_rms.count"):
+        for k in (
+            "state.archive.features",
+            "state.archive.returns",
+            "state.bonus_rms.mean",
+            "state.reward_rms.var",
+            "state.critic_ready",
+            "state.disc.input_rms.count",
+        ):
             assert torch.equal(saved[DISC][k], got[DISC][k]), k
     finally:
         restored.stop()
@@ -279,7 +291,9 @@ def _cartpole_ppo(reward_scale: float):
     name = f"cartpole_x{reward_scale:g}"
     register_env(
         name,
-        lambda cfg: gym.wrappers.TransformReward(gym.make("CartPole-v1"), lambda r: r * reward_scale),
+        lambda cfg: gym.wrappers.TransformReward(
+            gym.make("CartPole-v1"), lambda r: r * reward_scale
+        ),
     )
     config = (
         PPOConfig()
