@@ -80,10 +80,11 @@ def runs_made_otherwise(
                 continue
             run = json.loads(path.read_text())
             for key, want in settings.items():
-                if key in run or key in defaults:
-                    if run.get(key, defaults.get(key)) != want:
-                        clash.append(f"{path.name} ({key}={run.get(key, defaults.get(key))!r})")
-                        break
+                if key not in run and key not in defaults:
+                    continue
+                if (have := run.get(key, defaults.get(key))) != want:
+                    clash.append(f"{path.name} ({key}={have!r})")
+                    break
     return clash
 
 

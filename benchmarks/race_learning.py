@@ -85,9 +85,7 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
             map_id=getattr(args, "train_map", None),
             max_episode_steps=args.max_episode_steps,
             curriculum=json.loads(args.curriculum) if getattr(args, "curriculum", None) else None,
-            model_config=json.loads(args.model_config)
-            if getattr(args, "model_config", None)
-            else None,
+            model_config=run_settings(args)["model_config"] or None,
         )
         .env_runners(num_env_runners=0, num_envs_per_env_runner=args.envs)
         .training(
