@@ -11,6 +11,7 @@ gradients for nan/inf with one host sync per update instead of two per tensor.
 from __future__ import annotations
 
 import logging
+import math
 from typing import Any
 
 import gymnasium as gym
@@ -27,6 +28,7 @@ from ray.rllib.connectors.learner.add_next_observations_from_episodes_to_train_b
     AddNextObservationsFromEpisodesToTrainBatch,
 )
 from ray.rllib.core.columns import Columns
+from ray.rllib.core.learner.training_data import TrainingData
 from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
@@ -58,6 +60,22 @@ def proxy_module_id(policy_id: str) -> str:
 def is_aux_module(module_id: str) -> bool:
     """Whether a module id names one of ASOR's auxiliary modules."""
     return module_id.startswith((DISC_PREFIX, PROXY_PREFIX))
+
+
+def policy_minibatches(batch: MultiAgentBatch, num_epochs: int, minibatch_size: int) -> int:
+    """How many minibatches RLlib's `MiniBatchCyclicIterator` yields for this batch without
+    ASOR's aux modules: until every policy module has covered `num_epochs` passes (0 when the
+    batch holds no policy rows). The iterator counts a pass each time a module's rows wrap."""
+    needed = 0
+    for module_id, module_batch in batch.policy_batches.items():
+        if is_aux_module(module_id) or len(module_batch) == 0:
+            continue
+        rows, step = len(module_batch), minibatch_size
+        seq_lens = module_batch.get(SampleBatch.SEQ_LENS)
+        if seq_lens is not None:  # time-ranked [B, T] batches are cut along B
+            rows, step = len(seq_lens), max(1, int(len(seq_lens) * minibatch_size / rows))
+        needed = max(needed, math.ceil(num_epochs * rows / step))
+    return needed
 
 
 logger = logging.getLogger(__name__)
@@ -149,6 +167,35 @@ class AsorLearnerMixin(GradientCheckOnceMixin):
         super().before_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
         self._asor_timestep = float(timesteps.get(NUM_ENV_STEPS_SAMPLED_LIFETIME, 0) or 0)
         self._asor_rows_trained: dict[str, int] = {}
+
+    def _create_iterator_if_necessary(
+        self,
+        *,
+        training_data: TrainingData,
+        num_total_minibatches: int = 0,
+        num_epochs: int = 1,
+        minibatch_size: int | None = None,
+        **kwargs: Any,
+    ) -> Any:
+        """The policy gets exactly the minibatches it would get without ASOR.
+
+        RLlib's iterator runs until *every* module in the batch has covered `num_epochs`
+        passes, and the discriminator's batch (archive states + the whole batch) is longer
+        than the policy's: left alone, PPO would train the policy for ~5 epochs instead of 4
+        whenever the archive holds states. The count is fixed here from the policy modules
+        (aux modules are dropped after their own passes in `_update`).
+        """
+        if minibatch_size and not num_total_minibatches and not training_data.data_iterators:
+            batch = self._make_batch_if_necessary(training_data=training_data)  # type: ignore[attr-defined]
+            training_data = TrainingData(batch=batch)
+            num_total_minibatches = policy_minibatches(batch, num_epochs, minibatch_size)
+        return super()._create_iterator_if_necessary(  # type: ignore[misc]
+            training_data=training_data,
+            num_total_minibatches=num_total_minibatches,
+            num_epochs=num_epochs,
+            minibatch_size=minibatch_size,
+            **kwargs,
+        )
 
     def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
         if self.asor_in_pipeline:

@@ -1,6 +1,7 @@
 """PPO+ASOR on the lava world through real RLlib: rewards, aux training, checkpoints."""
 
 import copy
+import math
 
 import numpy as np
 import pytest
@@ -9,6 +10,7 @@ from ray.rllib.algorithms.algorithm import Algorithm
 from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModule
+from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 import rllib_asor
 import rllib_asor.envs  # noqa: F401  (registers rllib_asor/LavaWorld-v0)
@@ -263,6 +265,28 @@ def test_robust_rewards_change_by_the_updates_delta_and_archive_fills(robust):
     assert int((labels == 0).sum()) == int(valid.sum()) and int((labels == 1).sum()) > 0
 
 
+def test_policy_gets_num_epochs_even_when_the_discriminator_batch_is_longer(robust):
+    """RLlib's iterator runs until every module covered num_epochs; the discriminator's batch
+    (archive states + the whole batch) is longer than the policy's, which must not add epochs."""
+    learner = robust.learner_group._learner
+    while len(learner.module[DISC].unwrapped().state.archive) == 0:
+        robust.train()
+    episodes = sample_episodes(robust, 256)
+    policy_rows = sum(len(e) + 1 for e in episodes)  # + PPO's bootstrap row per episode chunk
+    optimizer = learner.get_optimizer(module_id=DEFAULT_MODULE_ID)
+    before = max(int(s["step"]) for s in optimizer.state.values())
+    learner.update(
+        episodes=episodes,
+        timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: 10_000},
+        num_epochs=2,
+        minibatch_size=64,
+        shuffle_batch_per_epoch=True,
+    )
+    steps = max(int(s["step"]) for s in optimizer.state.values()) - before
+    assert learner._asor_piece.aux_batch_sizes[DISC] > policy_rows
+    assert steps == math.ceil(2 * policy_rows / 64)
+
+
 def test_robust_checkpoint_restores_the_archive_and_normalisers(robust, tmp_path):
     robust.train()
     robust.save_to_path(str(tmp_path))
@@ -299,7 +323,10 @@ def _cartpole_ppo(reward_scale: float):
         PPOConfig()
         .environment(name)
         .env_runners(num_env_runners=0, num_envs_per_env_runner=4)
+        # No value-loss clipping: RLlib's default (10) keeps a critic of returns ~1e4 from
+        # ranking states for many iterations, and ASOR waits for it (λ warm-up).
         .training(train_batch_size=512, minibatch_size=128, num_epochs=2, lr=1e-3)
+        .training(vf_clip_param=float("inf"))
         .rl_module(model_config={"fcnet_hiddens": [32, 32]})
         .debugging(seed=0)
     )
@@ -312,8 +339,10 @@ def test_robust_bonus_is_scale_free_and_finite_on_a_constant_reward(ray_session)
     for scale in (1.0, 100.0):
         algo = _cartpole_ppo(scale).build_algo()
         try:
-            for _ in range(4):
+            for _ in range(10):  # until the critic ranks states (λ warm-up) and D_P exists
                 asor = algo.train()["asor"]
+                if asor["active"] == 1.0:
+                    break
         finally:
             algo.stop()
         assert asor["active"] == 1.0 and asor["reward_scale"] == pytest.approx(scale, rel=1e-3)
