@@ -4,7 +4,10 @@ One measurement = one fresh process that builds `benchmarks.race_learning.race_c
 network, a map drawn per episode, 1000-step episodes, train batch 1024, minibatch 256, 4 epochs,
 ASOR's default of that tree with `obs_keys=[agent, destination]`), runs `--warmup` iterations,
 then times `--iters` calls of `algo.train()` by the wall clock: env steps/s end to end
-(sampling, connectors, forward passes, the learner update, ASOR's piece, metrics).
+(sampling, connectors, forward passes, the learner update, ASOR's piece, metrics). The default
+warm-up (24 iterations) measures ASOR's steady state: the first race episodes end after ~16
+iterations (1000 steps per env), and from then on the archive's states join the
+discriminator's batch (measurements before session 7 used 2, the archive-empty start).
 
 `--trees A B ...` measures each source tree (a checkout, e.g. `git worktree add /tmp/old <commit>`)
 in turn, `--rounds` times, interleaved (A, B, A, B, ...), so load drifts hit every tree alike;
@@ -113,9 +116,18 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
         stats.sort_stats("cumulative").print_stats(45)
         stats.sort_stats("tottime").print_stats(30)
     steps = result["num_env_steps_sampled_lifetime"] - steps0
+    policy = result.get("learners", {}).get(DEFAULT_MODULE_ID, {})
     algo.stop()
     ray.shutdown()
-    return {"env_steps": steps, "wall_s": wall, "env_steps_per_s": steps / wall}
+    return {
+        "env_steps": steps,
+        "wall_s": wall,
+        "env_steps_per_s": steps / wall,
+        # Rows the policy trained on in the last iteration (PPO: minibatches × 256) and the
+        # archive's size: ASOR's steady state has archive states in the discriminator's batch.
+        "policy_rows_trained": float(policy.get("num_module_steps_trained", "nan")),
+        "archive_states": float(result.get("asor", {}).get("archive_states", "nan")),
+    }
 
 
 def run_tree(tree: Path, layout: str, net: str, args: argparse.Namespace) -> dict[str, Any]:
@@ -143,7 +155,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--nets", nargs="+", choices=list(NETS), default=["default"])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--iters", type=int, default=8, help="timed iterations (1024 steps each)")
-    parser.add_argument("--warmup", type=int, default=2)
+    parser.add_argument(
+        "--warmup",
+        type=int,
+        default=24,
+        help="untimed iterations; ≥ 17 reaches ASOR's steady state (archive states in its batch)",
+    )
     parser.add_argument("--no-asor", action="store_true", help="plain PPO")
     parser.add_argument(
         "--learner-threads", type=int, default=1, help="torch threads of the driver (Learner)"
