@@ -182,8 +182,9 @@ class AsorLearnerMixin(GradientCheckOnceMixin):
         RLlib's iterator runs until *every* module in the batch has covered `num_epochs`
         passes, and the discriminator's batch (archive states + the whole batch) is longer
         than the policy's: left alone, PPO trained the policy for more epochs than asked
-        whenever the archive held states (the race: ~4.9 instead of 4). The count is fixed here from the policy modules
-        (aux modules are dropped after their own passes in `_update`).
+        whenever the archive held states (the race: ~4.9 instead of 4). The count is fixed
+        here from the policy modules (aux modules are dropped after their own passes in
+        `_update`).
         """
         if minibatch_size and not num_total_minibatches and not training_data.data_iterators:
             batch = self._make_batch_if_necessary(training_data=training_data)  # type: ignore[attr-defined]

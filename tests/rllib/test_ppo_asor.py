@@ -10,12 +10,15 @@ from ray.rllib.algorithms.algorithm import Algorithm
 from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModule
+from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
+from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
 import rllib_asor
 import rllib_asor.envs  # noqa: F401  (registers rllib_asor/LavaWorld-v0)
 from rllib_asor.asor.reward import reward_bonus
 from rllib_asor.rllib.connector import AsorRewardConnector
+from rllib_asor.rllib.learners import policy_minibatches
 
 DISC, PROXY = "asor_disc.default_policy", "asor_proxy.default_policy"
 
@@ -263,6 +266,18 @@ def test_robust_rewards_change_by_the_updates_delta_and_archive_fills(robust):
     # The discriminator batch: archive states (label 1) and the whole batch (label 0).
     labels = batch[DISC]["asor_label"]
     assert int((labels == 0).sum()) == int(valid.sum()) and int((labels == 1).sum()) > 0
+
+
+@pytest.mark.parametrize("rows", [1, 63, 64, 1024, 1040])
+@pytest.mark.parametrize("minibatch", [64, 256])
+def test_policy_minibatches_matches_rllibs_iterator_on_the_policy_alone(rows, minibatch):
+    policy = SampleBatch({"x": np.arange(rows)})
+    longer_disc = SampleBatch({"x": np.arange(rows + 300)})
+    alone = MiniBatchCyclicIterator(
+        MultiAgentBatch({DEFAULT_MODULE_ID: policy}, rows), num_epochs=3, minibatch_size=minibatch
+    )
+    both = MultiAgentBatch({DEFAULT_MODULE_ID: policy, DISC: longer_disc}, rows)
+    assert policy_minibatches(both, 3, minibatch) == sum(1 for _ in alone)
 
 
 def test_policy_gets_num_epochs_even_when_the_discriminator_batch_is_longer(robust):
