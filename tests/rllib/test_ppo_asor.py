@@ -338,10 +338,15 @@ def _cartpole_ppo(reward_scale: float):
         PPOConfig()
         .environment(name)
         .env_runners(num_env_runners=0, num_envs_per_env_runner=4)
-        # No value-loss clipping: RLlib's default (10) keeps a critic of returns ~1e4 from
-        # ranking states for many iterations, and ASOR waits for it (λ warm-up).
-        .training(train_batch_size=512, minibatch_size=128, num_epochs=2, lr=1e-3)
-        .training(vf_clip_param=float("inf"))
+        .training(
+            train_batch_size=512,
+            minibatch_size=128,
+            num_epochs=2,
+            lr=1e-3,
+            # No value-loss clipping: RLlib's default (10) keeps a critic of returns ~1e4 from
+            # ranking states for many iterations, and ASOR waits for it (λ warm-up).
+            vf_clip_param=float("inf"),
+        )
         .rl_module(model_config={"fcnet_hiddens": [32, 32]})
         .debugging(seed=0)
     )
