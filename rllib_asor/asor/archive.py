@@ -138,10 +138,13 @@ class StateArchive(nn.Module):
 
 
 def discounted_return_to_go(rewards: torch.Tensor, gamma: float) -> torch.Tensor:
-    """G_t = Σ_k γ^k r_{t+k} within one episode, shape like `rewards`."""
-    out = torch.empty_like(rewards, dtype=torch.float32)
-    running = 0.0
-    for t in range(len(rewards) - 1, -1, -1):
-        running = float(rewards[t]) + gamma * running
-        out[t] = running
-    return out
+    """G_t = Σ_k γ^k r_{t+k} within one episode (float32, shape like `rewards`).
+
+    The recurrence G_t = r_t + γ·G_{t+1} as a linear filter over the reversed rewards, in
+    float64 (scipy's `lfilter`).
+    """
+    from scipy.signal import lfilter
+
+    r = rewards.detach().cpu().double().numpy()[::-1]
+    g = lfilter([1.0], [1.0, -float(gamma)], r)[::-1].copy()
+    return torch.from_numpy(g).float()

@@ -139,6 +139,14 @@ def test_archive_survives_a_state_dict_round_trip():
 
 def test_discounted_return_to_go():
     assert discounted_return_to_go(torch.tensor([1.0, 0.0, 2.0]), 0.5).tolist() == [1.5, 1.0, 2.0]
+    assert discounted_return_to_go(torch.zeros(0), 0.99).shape == (0,)
+    rewards = torch.randn(500, generator=torch.Generator().manual_seed(0))
+    expected, running = torch.empty(500), 0.0
+    for t in range(499, -1, -1):  # the recurrence G_t = r_t + γ G_{t+1}, in float64
+        running = float(rewards[t]) + 0.99 * running
+        expected[t] = running
+    got = discounted_return_to_go(rewards, 0.99)
+    assert got.dtype == torch.float32 and torch.equal(got, expected)
 
 
 # ------------------------------------------------------------------ the whole update
