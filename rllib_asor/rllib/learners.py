@@ -156,8 +156,19 @@ class AsorLearnerMixin(GradientCheckOnceMixin):
             pipeline.insert_after(AddObservationsFromEpisodesToBatch, AddDynamicsIdsToBatch())
         if self.asor_insert_before is None:
             pipeline.append(self._asor_piece)
-        else:
-            pipeline.insert_before(self.asor_insert_before, self._asor_piece)
+            return
+        # RLlib's insert_before matches the exact class and, when none matches, inserts before
+        # the last piece without a word: find the piece here (subclasses count) or refuse.
+        anchor = next(
+            (c for c in pipeline.connectors if isinstance(c, self.asor_insert_before)), None
+        )
+        if anchor is None:
+            raise ValueError(
+                f"ASOR must run before {self.asor_insert_before.__name__} in the Learner "
+                "connector pipeline, and this pipeline has none (keep "
+                "add_default_connectors_to_learner_pipeline=True)"
+            )
+        pipeline.insert_before(type(anchor), self._asor_piece)
 
     def asor_connector_kwargs(self) -> dict[str, Any]:
         """Extra keyword arguments for the connector (e.g. a `value_fn` for off-policy)."""

@@ -133,6 +133,35 @@ def test_checkpoint_restores_aux_weights_and_normaliser(algo, tmp_path):
         restored.stop()
 
 
+def test_asor_piece_goes_before_gae_subclasses_and_refuses_a_pipeline_without_gae(algo):
+    from ray.rllib.connectors.learner import GeneralAdvantageEstimation
+
+    class MyGAE(GeneralAdvantageEstimation):
+        pass
+
+    learner = algo.learner_group._learner
+    pipeline = learner._learner_connector
+    saved = list(pipeline.connectors)
+    try:
+        pipeline.connectors = [
+            MyGAE(gamma=0.99, lambda_=0.95) if isinstance(c, GeneralAdvantageEstimation) else c
+            for c in saved
+            if not isinstance(c, AsorRewardConnector)
+        ]
+        learner._insert_asor_piece()
+        names = [type(c).__name__ for c in pipeline.connectors]
+        assert names.index("AsorRewardConnector") == names.index("MyGAE") - 1
+        pipeline.connectors = [
+            c
+            for c in pipeline.connectors
+            if not isinstance(c, (AsorRewardConnector, GeneralAdvantageEstimation))
+        ]
+        with pytest.raises(ValueError, match="before GeneralAdvantageEstimation"):
+            learner._insert_asor_piece()
+    finally:
+        pipeline.connectors = saved
+
+
 def test_nan_observation_is_a_clear_error(algo):
     learner = algo.learner_group._learner
     piece = next(
