@@ -81,6 +81,21 @@ def policy_minibatches(batch: MultiAgentBatch, num_epochs: int, minibatch_size: 
 logger = logging.getLogger(__name__)
 
 
+def insert_beside(pipeline: Any, anchor: type, piece: Any, *, before: bool) -> None:
+    """Insert `piece` right before (or after) the first piece that is an `anchor`, subclasses
+    included. RLlib's `insert_before`/`insert_after` match the exact class and, when none
+    matches, insert next to the pipeline's last piece without a word; here that is an error."""
+    found = next((c for c in pipeline.connectors if isinstance(c, anchor)), None)
+    where = "before" if before else "after"
+    if found is None:
+        raise ValueError(
+            f"ASOR needs {type(piece).__name__} {where} {anchor.__name__} in the Learner "
+            "connector pipeline, and this pipeline has none (keep "
+            "add_default_connectors_to_learner_pipeline=True)"
+        )
+    (pipeline.insert_before if before else pipeline.insert_after)(type(found), piece)
+
+
 class GradientCheckOnceMixin:
     """RLlib's rule for nan/inf gradients (set them to zero, with a warning, unless
     `torch_skip_nan_gradients`), checked on their total norm: one host sync per update where
@@ -149,26 +164,20 @@ class AsorLearnerMixin(GradientCheckOnceMixin):
         if needs_next_obs and not any(
             isinstance(c, AddNextObservationsFromEpisodesToTrainBatch) for c in pipeline.connectors
         ):
-            pipeline.insert_after(
-                AddObservationsFromEpisodesToBatch, AddNextObservationsFromEpisodesToTrainBatch()
+            insert_beside(
+                pipeline,
+                AddObservationsFromEpisodesToBatch,
+                AddNextObservationsFromEpisodesToTrainBatch(),
+                before=False,
             )
         if self.asor.proxy == "rnd_per_dynamics" and self.asor.needs_proxy:
-            pipeline.insert_after(AddObservationsFromEpisodesToBatch, AddDynamicsIdsToBatch())
+            insert_beside(
+                pipeline, AddObservationsFromEpisodesToBatch, AddDynamicsIdsToBatch(), before=False
+            )
         if self.asor_insert_before is None:
             pipeline.append(self._asor_piece)
-            return
-        # RLlib's insert_before matches the exact class and, when none matches, inserts before
-        # the last piece without a word: find the piece here (subclasses count) or refuse.
-        anchor = next(
-            (c for c in pipeline.connectors if isinstance(c, self.asor_insert_before)), None
-        )
-        if anchor is None:
-            raise ValueError(
-                f"ASOR must run before {self.asor_insert_before.__name__} in the Learner "
-                "connector pipeline, and this pipeline has none (keep "
-                "add_default_connectors_to_learner_pipeline=True)"
-            )
-        pipeline.insert_before(type(anchor), self._asor_piece)
+        else:
+            insert_beside(pipeline, self.asor_insert_before, self._asor_piece, before=True)
 
     def asor_connector_kwargs(self) -> dict[str, Any]:
         """Extra keyword arguments for the connector (e.g. a `value_fn` for off-policy)."""
