@@ -71,6 +71,7 @@ def run_settings(args: argparse.Namespace) -> dict[str, Any]:
     return {
         "sampling": getattr(args, "sampling", "local"),
         "model_config": json.loads(model_config) if model_config else {},
+        "drop_bootstrap_rows": bool(getattr(args, "drop_bootstrap_rows", False)),
     }
 
 
@@ -107,6 +108,10 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
                 num_env_runners=1, num_envs_per_env_runner=args.envs, num_cpus_per_env_runner=1
             )
         )
+    if run_settings(args)["drop_bootstrap_rows"]:
+        from rllib_asor.rllib.lean_ppo import drop_bootstrap_rows
+
+        config = drop_bootstrap_rows(config)
     if asor is not None:
         settings = {"seed": seed, "obs_keys": list(RACE_ASOR_OBS_KEYS)} | asor
         config = rllib_asor.with_asor(config, **settings)
@@ -290,6 +295,11 @@ def main(argv: list[str] | None = None) -> int:
         "Learner trains (OverlappedPPO, 2 CPUs per trial)",
     )
     parser.add_argument(
+        "--drop-bootstrap-rows",
+        action="store_true",
+        help="PPO trains without its masked bootstrap rows (rllib_asor.rllib.lean_ppo)",
+    )
+    parser.add_argument(
         "--parallel",
         type=int,
         default=3,
@@ -303,7 +313,9 @@ def main(argv: list[str] | None = None) -> int:
     names = [n for n, _ in methods]
     if not args.summarize_only:
         seeds = range(args.first_seed, args.first_seed + args.seeds)
-        if clash := runs_made_otherwise(out, names, seeds, run_settings(args)):
+        if clash := runs_made_otherwise(
+            out, names, seeds, run_settings(args), defaults={"drop_bootstrap_rows": False}
+        ):
             parser.error(
                 f"{out}/runs holds runs made with other settings ({', '.join(clash)}): "
                 "use another --out or another method name"

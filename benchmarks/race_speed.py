@@ -15,7 +15,9 @@ each process imports `benchmarks` and `rllib_asor` from its tree (PYTHONPATH), t
 only code they share. Layouts (`--layouts`, `LAYOUTS`): `local` (race_learning's: sampling in
 the driver, 16 envs, one core), `runners2` (the race YAMLs': 2 env runners × 8 envs at 0.5 CPU
 each), `overlap1` / `overlap2` (1 × 16 or 2 × 8 with `OverlappedPPO`; skipped for trees
-without it). Networks (`--nets`, `NETS`): `default` (the tuned examples') and `small`.
+without it), `overlap1drop` (`overlap1` with `drop_bootstrap_rows`: the fast example's
+layout; skipped likewise). Networks (`--nets`, `NETS`): `default` (the tuned examples') and
+`small`.
 
     git worktree add /tmp/race-old fb9d406
     python benchmarks/race_speed.py --trees /tmp/race-old . --rounds 3 --out benchmarks/out/race_speed
@@ -39,12 +41,14 @@ from pathlib import Path
 from typing import Any
 
 LAYOUTS = {
-    "local": (0, 16, False),
-    "runners2": (2, 8, False),
-    "overlap1": (1, 16, True),
-    "overlap2": (2, 8, True),
+    "local": (0, 16, False, False),
+    "runners2": (2, 8, False, False),
+    "overlap1": (1, 16, True, False),
+    "overlap2": (2, 8, True, False),
+    "overlap1drop": (1, 16, True, True),
 }
-"""Layout → (env runners, envs per runner, overlapped sampling: rllib_asor/rllib/overlap.py)."""
+"""Layout → (env runners, envs per runner, overlapped sampling: rllib_asor/rllib/overlap.py,
+PPO without its masked bootstrap rows: rllib_asor/rllib/lean_ppo.py)."""
 
 NETS: dict[str, dict[str, Any]] = {
     "default": {},
@@ -63,7 +67,7 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
     from benchmarks.race_learning import race_config
 
     torch.set_num_threads(args.learner_threads)
-    runners, envs, overlap = LAYOUTS[args.layout]
+    runners, envs, overlap, drop = LAYOUTS[args.layout]
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     ns = argparse.Namespace(
         steps=10**7, batch=1024, epochs=4, envs=envs, max_episode_steps=1000, train_map=None
@@ -92,6 +96,13 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
             ray.shutdown()
             return {"unsupported": True}
         config = overlap_sampling(config)
+    if drop:
+        try:
+            from rllib_asor.rllib.lean_ppo import drop_bootstrap_rows
+        except ImportError:  # a tree from before it existed
+            ray.shutdown()
+            return {"unsupported": True}
+        config = drop_bootstrap_rows(config)
     algo = config.build_algo()
     learner_net = algo.learner_group._learner.module[DEFAULT_MODULE_ID].settings
     assert all(learner_net[k] == v for k, v in NETS[args.net].items()), learner_net
@@ -127,6 +138,9 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
         # archive's size: ASOR's steady state has archive states in the discriminator's batch.
         "policy_rows_trained": float(policy.get("num_module_steps_trained", "nan")),
         "archive_states": float(result.get("asor", {}).get("archive_states", "nan")),
+        # RLlib's smoothed per-iteration timers (s): with the overlap, `env_runner_sampling_timer`
+        # is the wait for the runner's batch, so a non-zero value means sampling is the slower half.
+        "timers": {k: float(v) for k, v in result.get("timers", {}).items()},
     }
 
 
@@ -153,6 +167,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trees", nargs="+", default=["."], help="source trees to compare")
     parser.add_argument("--layouts", nargs="+", choices=list(LAYOUTS), default=list(LAYOUTS))
     parser.add_argument("--nets", nargs="+", choices=list(NETS), default=["default"])
+    parser.add_argument(
+        "--combos",
+        nargs="+",
+        default=None,
+        help="explicit LAYOUT:NET pairs (e.g. runners2:default overlap1drop:small) instead of "
+        "every layout with every net",
+    )
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--iters", type=int, default=8, help="timed iterations (1024 steps each)")
     parser.add_argument(
@@ -177,6 +198,13 @@ def main(argv: list[str] | None = None) -> int:
     trees = [Path(t).resolve() for t in args.trees]
     rows: list[dict[str, Any]] = []
     combos = [(lay, net) for lay in args.layouts for net in args.nets]
+    if args.combos:
+        combos = [tuple(c.split(":", 1)) for c in args.combos]
+        if bad := [c for c in combos if len(c) != 2 or c[0] not in LAYOUTS or c[1] not in NETS]:
+            parser.error(
+                f"--combos {bad}: allowed LAYOUT:NET with LAYOUT in {', '.join(LAYOUTS)} "
+                f"and NET in {', '.join(NETS)}"
+            )
     for r in range(args.rounds):
         for layout, net in combos:
             for tree in trees:

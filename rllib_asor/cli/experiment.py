@@ -377,19 +377,25 @@ def _quiet() -> Iterator[None]:
         logging.disable(prev)
 
 
+PPO_ONLY_LEARNER_KEYS = ("overlap_sampling", "drop_bootstrap_rows")
+"""`learner_config_dict` switches of ours that only PPO reads (docs/speed.md)."""
+
+
 def algorithm_class(exp: Experiment) -> type:
     """The RLlib Algorithm class for `exp.run` (UsageError if unknown)."""
     from ray.rllib.algorithms.registry import ALGORITHMS
     from ray.tune.registry import get_trainable_cls
 
     learner_dict = exp.config.get("learner_config_dict")
-    if isinstance(learner_dict, dict) and learner_dict.get("overlap_sampling"):
-        if exp.run != "PPO":
+    learner_dict = learner_dict if isinstance(learner_dict, dict) else {}
+    for key in PPO_ONLY_LEARNER_KEYS:
+        if learner_dict.get(key) and exp.run != "PPO":
             raise UsageError(
                 f"works with run: PPO only, not {exp.run}",
                 source=exp.source,
-                key=f"{exp.name}.config.learner_config_dict.overlap_sampling",
+                key=f"{exp.name}.config.learner_config_dict.{key}",
             )
+    if learner_dict.get("overlap_sampling"):
         from rllib_asor.rllib.overlap import OverlappedPPO
 
         return OverlappedPPO  # PPO whose env runners sample during the update
@@ -451,6 +457,9 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
         for key in exp.config:
             _check_key(cfg, key, exp)
         values = grid.with_candidates(exp.config, choice)
+        family = family_of(exp.env)
+        if family is not None:
+            values = {**family.config_defaults, **values}
         model_config = values.pop("model_config", None)
         env_config = values.pop("env_config", None) or {}
         connector = values.pop("env_to_module_connector", None)
@@ -464,7 +473,6 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
                 raise UsageError(
                     _one_line(e), source=exp.source, key=f"{exp.name}.config.multi_agent"
                 ) from None
-        family = family_of(exp.env)
         if rl_module is None and family is not None and family.default_module is not None:
             rl_module = {"module_class": family.default_module}
         if rl_module is not None:
@@ -490,6 +498,11 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
             from rllib_asor.rllib.callbacks import add_callbacks
 
             add_callbacks(cfg, curriculum)
+        if exp.asor is None and exp.run == "PPO":  # with_asor's PPO Learner reads the key too
+            from rllib_asor.rllib.lean_ppo import drop_bootstrap_rows, drop_enabled
+
+            if drop_enabled(cfg):
+                cfg = drop_bootstrap_rows(cfg)
         if exp.asor is None and exp.run in ("SAC", "CQL"):  # with_asor does it for ASOR runs
             from rllib_asor.rllib.fast_sac import FAST_KEY, fast_off_policy
 

@@ -2,7 +2,7 @@
 
 A family names the env ids it covers (by prefix) and its defaults: extra `env_config` for
 `--test` runs, the metrics callbacks added when a YAML names none, the RLModule used when a
-YAML names none, and whether (and how) a `curriculum:` block is supported. Adding an env
+YAML names none, config keys set when a YAML does not set them, and whether (and how) a `curriculum:` block is supported. Adding an env
 family means adding an entry to `FAMILIES`; the CLI has no env-specific branches.
 """
 
@@ -25,6 +25,8 @@ class EnvFamily:
     """The callbacks class added when the experiment names no `callbacks`."""
     default_module: str | None = None
     """`rl_module.module_class` used when the experiment names none (rllib_asor.models)."""
+    config_defaults: Mapping[str, Any] = field(default_factory=dict)
+    """Config keys set when the experiment does not set them."""
     curriculum: Callable[[Mapping[str, Any]], type] | None = None
     """Builds the callbacks class of a `curriculum:` block (ValueError/TypeError if invalid);
     None: the family has no curriculum."""
@@ -52,10 +54,14 @@ RACE = EnvFamily(
     test_env_config={"max_episode_steps": 100},
     metrics_callbacks=_race_metrics,
     default_module="race_net",
+    config_defaults={"normalize_actions": False, "clip_actions": False},
     curriculum=_race_curriculum,
 )
 """The obstacle race (single and multi-racer): race/... metrics, the paper's network, a map
-curriculum; `--test` episodes end after 100 steps so race metrics appear in 2 × 256 steps."""
+curriculum; `--test` episodes end after 100 steps so race metrics appear in 2 × 256 steps.
+Its actions are discrete (MultiDiscrete): RLlib's action unsquash/clip leave them as they are
+but deep-copy and walk every sampled action (~4 % of race sampling), so they are off unless the
+experiment sets them (`race_ppo_config` uses the same defaults)."""
 
 FAMILIES: tuple[EnvFamily, ...] = (RACE,)
 

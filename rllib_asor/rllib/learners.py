@@ -4,8 +4,8 @@
 `config.learner_config_dict["asor"]`, finds each trained policy's discriminator/proxy modules,
 and inserts `AsorRewardConnector` at the algorithm's place (PPO: right before GAE). It also
 gives the auxiliary modules their own Adam optimisers (learning rates from `AsorConfig`,
-frozen RND target excluded). `GradientCheckOnceMixin` (in every Learner here) checks the
-gradients for nan/inf with one host sync per update instead of two per tensor.
+frozen RND target excluded). Every Learner here also has `SameMathSpeedMixin` (learner_speed.py):
+one nan/inf check per update, fused Adam, and a Learner connector without autograd.
 """
 
 from __future__ import annotations
@@ -33,14 +33,19 @@ from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
+from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.rllib.connector import (
     AddDynamicsIdsToBatch,
     AsorRewardConnector,
     AuxModuleIds,
+    SharedValuesGAE,
     critic_values,
 )
+from rllib_asor.rllib.lean_ppo import LeanPPOMixin
+from rllib_asor.rllib.learner_speed import SameMathSpeedMixin
+from rllib_asor.rllib.pipeline import insert_beside
 from rllib_asor.rllib.replay import MINIBATCH_KEY, FlatTransitions
 
 DISC_PREFIX = "asor_disc."
@@ -81,45 +86,7 @@ def policy_minibatches(batch: MultiAgentBatch, num_epochs: int, minibatch_size: 
 logger = logging.getLogger(__name__)
 
 
-def insert_beside(pipeline: Any, anchor: type, piece: Any, *, before: bool) -> None:
-    """Insert `piece` right before (or after) the first piece that is an `anchor`, subclasses
-    included. RLlib's `insert_before`/`insert_after` match the exact class and, when none
-    matches, insert next to the pipeline's last piece without a word; here that is an error."""
-    found = next((c for c in pipeline.connectors if isinstance(c, anchor)), None)
-    where = "before" if before else "after"
-    if found is None:
-        raise ValueError(
-            f"ASOR needs {type(piece).__name__} {where} {anchor.__name__} in the Learner "
-            "connector pipeline, and this pipeline has none (keep "
-            "add_default_connectors_to_learner_pipeline=True)"
-        )
-    (pipeline.insert_before if before else pipeline.insert_after)(type(found), piece)
-
-
-class GradientCheckOnceMixin:
-    """RLlib's rule for nan/inf gradients (set them to zero, with a warning, unless
-    `torch_skip_nan_gradients`), checked on their total norm: one host sync per update where
-    TorchLearner syncs twice per tensor (~160 times per race PPO minibatch, ~6 % of it)."""
-
-    def build(self) -> None:
-        super().build()  # type: ignore[misc]
-        self._check_gradients_once = not self.config.torch_skip_nan_gradients  # type: ignore[attr-defined]
-        # This Learner's own copy of the config: TorchLearner's per-tensor checks are done here.
-        self.config.torch_skip_nan_gradients = True  # type: ignore[attr-defined]
-
-    def apply_gradients(self, gradients_dict: dict[Any, torch.Tensor | None]) -> None:
-        if self._check_gradients_once:
-            grads = [g for g in gradients_dict.values() if g is not None]
-            if grads and not torch.isfinite(torch.nn.utils.get_total_norm(grads)):
-                logger.warning("Gradients contain nan/inf values: setting them to zero.")
-                gradients_dict = {
-                    pid: None if g is None else torch.nan_to_num(g)
-                    for pid, g in gradients_dict.items()
-                }
-        super().apply_gradients(gradients_dict)  # type: ignore[misc]
-
-
-class AsorLearnerMixin(GradientCheckOnceMixin):
+class AsorLearnerMixin(SameMathSpeedMixin):
     """Adds the ASOR piece to a Learner's pipeline; mix in before the algorithm's Learner."""
 
     asor_insert_before: type | None = GeneralAdvantageEstimation
@@ -176,8 +143,13 @@ class AsorLearnerMixin(GradientCheckOnceMixin):
             )
         if self.asor_insert_before is None:
             pipeline.append(self._asor_piece)
-        else:
-            insert_beside(pipeline, self.asor_insert_before, self._asor_piece, before=True)
+            return
+        insert_beside(pipeline, self.asor_insert_before, self._asor_piece, before=True)
+        gae = next((c for c in pipeline.connectors if type(c) is GeneralAdvantageEstimation), None)
+        if gae is not None:  # RLlib's own GAE (not a user's subclass): reuse ASOR's critic pass
+            shared = SharedValuesGAE(gamma=gae.gamma, lambda_=gae.lambda_)
+            pipeline.insert_after(GeneralAdvantageEstimation, shared)
+            pipeline.remove(GeneralAdvantageEstimation)
 
     def asor_connector_kwargs(self) -> dict[str, Any]:
         """Extra keyword arguments for the connector (e.g. a `value_fn` for off-policy)."""
@@ -210,13 +182,27 @@ class AsorLearnerMixin(GradientCheckOnceMixin):
             batch = self._make_batch_if_necessary(training_data=training_data)  # type: ignore[attr-defined]
             training_data = TrainingData(batch=batch)
             num_total_minibatches = policy_minibatches(batch, num_epochs, minibatch_size)
-        return super()._create_iterator_if_necessary(  # type: ignore[misc]
+        batch_iter = super()._create_iterator_if_necessary(  # type: ignore[misc]
             training_data=training_data,
             num_total_minibatches=num_total_minibatches,
             num_epochs=num_epochs,
             minibatch_size=minibatch_size,
             **kwargs,
         )
+        if self.asor_in_pipeline and isinstance(batch_iter, MiniBatchCyclicIterator):
+            return self._without_finished_aux(batch_iter)
+        return batch_iter
+
+    def _without_finished_aux(self, batch_iter: MiniBatchCyclicIterator) -> Any:
+        """The iterator's minibatches; an aux module's batch leaves the iterator once it has
+        trained on `aux_rows` rows, instead of being sliced (and reshuffled) for every policy
+        minibatch after it and dropped in `_update` (~3 % of a race PPO update)."""
+        module_batches = batch_iter._batch.policy_batches
+        for minibatch in batch_iter:
+            yield minibatch  # `_update` counts the aux rows it trains on
+            for module_id in [m for m in module_batches if is_aux_module(m)]:
+                if self._asor_rows_trained.get(module_id, 0) >= self.aux_rows(module_id):
+                    del module_batches[module_id]
 
     def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
         if self.asor_in_pipeline:
@@ -258,7 +244,7 @@ class AsorLearnerMixin(GradientCheckOnceMixin):
         )
 
 
-class AsorPPOTorchLearner(AsorLearnerMixin, PPOTorchLearner):
+class AsorPPOTorchLearner(AsorLearnerMixin, LeanPPOMixin, PPOTorchLearner):
     """PPO's torch Learner with ASOR's reward augmentation before GAE."""
 
 
@@ -293,7 +279,7 @@ class _SoftQAsorMixin(AsorLearnerMixin):
         return losses
 
 
-class FastSACLearnerMixin(GradientCheckOnceMixin):
+class FastSACLearnerMixin(SameMathSpeedMixin):
     """Builds the train batch straight from `FlatReplayBuffer` samples (`FlatTransitions`),
     skipping the learner connector's per-episode walk; other data goes the usual way.
 
