@@ -36,11 +36,12 @@ import gymnasium as gym
 import numpy as np
 import torch
 from ray.rllib.core.columns import Columns
-from ray.rllib.core.distribution.torch.torch_distribution import TorchMultiCategorical
 from ray.rllib.core.rl_module.apis import ValueFunctionAPI
 from ray.rllib.core.rl_module.rl_module import RLModule
 from ray.rllib.core.rl_module.torch import TorchRLModule
 from torch import nn
+
+from rllib_asor.models.multi_categorical import PaddedMultiCategorical
 
 MAP_KEYS: tuple[str, ...] = ("terrain", "items", "targets", "goals")
 """Grid observations (channels first), each through its own CNN."""
@@ -231,7 +232,7 @@ class RaceNetModule(TorchRLModule, ValueFunctionAPI):
         self.vf_encoder = None if cfg["vf_share_encoders"] else RaceEncoder(obs_space, cfg)
         vf_trunk, vf_dim = _mlp(self.encoder.out_dim, cfg["vf_hiddens"])
         self.vf = nn.Sequential(*vf_trunk, nn.Linear(vf_dim, 1))
-        self.action_dist_cls = TorchMultiCategorical.get_partial_dist_cls(
+        self.action_dist_cls = PaddedMultiCategorical.get_partial_dist_cls(
             space=act_space, input_lens=self.nvec
         )
 

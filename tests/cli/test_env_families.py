@@ -40,3 +40,29 @@ def test_curriculum_outside_a_family_that_has_one_names_the_allowed_envs(tmp_pat
     )
     with pytest.raises(UsageError, match=r"curriculum.*allowed envs: game_env/\.\.\..*CartPole-v1"):
         experiment.validate(experiment.load_file(str(path))[0])
+
+
+@pytest.mark.parametrize("given, expected", [("", False), ("normalize_actions: true, ", True)])
+def test_race_actions_are_not_unsquashed_unless_the_file_asks(tmp_path: Path, given, expected):
+    """The race's actions are discrete: RLlib's unsquash/clip are no-ops there (and cost time)."""
+    from rllib_asor.rllib.race import race_ppo_config
+
+    path = tmp_path / "x.yaml"
+    path.write_text(
+        f"x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  config: {{{given}lr: 0.001}}\n"
+    )
+    config = experiment.validate(experiment.load_file(str(path))[0])
+    assert config.normalize_actions is expected and config.clip_actions is False
+    assert race_ppo_config().normalize_actions is False
+
+
+def test_drop_bootstrap_rows_in_a_ppo_file_gets_the_lean_learner(tmp_path: Path):
+    from rllib_asor.rllib.lean_ppo import LeanPPOTorchLearner
+
+    path = tmp_path / "x.yaml"
+    path.write_text(
+        "x:\n  env: CartPole-v1\n  run: PPO\n"
+        "  config: {learner_config_dict: {drop_bootstrap_rows: true}}\n"
+    )
+    config = experiment.build_algo_config(experiment.load_file(str(path))[0])
+    assert config.learner_class is LeanPPOTorchLearner

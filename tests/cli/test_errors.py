@@ -220,11 +220,11 @@ def test_version_names_ours_ray_and_torch(capsys):
     assert out.startswith("rllib-asor ") and "ray 2.60.0" in out and "torch " in out
 
 
-def test_overlap_sampling_on_another_algorithm_exits_2(write_yaml, capsys):
+@pytest.mark.parametrize("key", ["overlap_sampling", "drop_bootstrap_rows"])
+def test_a_ppo_only_switch_on_another_algorithm_exits_2(write_yaml, capsys, key):
     path = write_yaml(
-        "x:\n  env: Pendulum-v1\n  run: SAC\n"
-        "  config: {learner_config_dict: {overlap_sampling: true}}\n"
+        f"x:\n  env: Pendulum-v1\n  run: SAC\n  config: {{learner_config_dict: {{{key}: true}}}}\n"
     )
     rc, err = _run(capsys, ["train", "file", path])
     assert rc == 2
-    _assert_one_line(err, "x.config.learner_config_dict.overlap_sampling", "PPO only")
+    _assert_one_line(err, f"x.config.learner_config_dict.{key}", "PPO only")
