@@ -31,6 +31,7 @@ per tree, layout and network, and its ratio to the first tree's fastest).
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import statistics
@@ -89,20 +90,15 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
             num_envs_per_env_runner=envs,
             num_cpus_per_env_runner=1 / runners,
         )
-    if overlap:
+    switches = [("overlap", "overlap_sampling")] if overlap else []
+    switches += [("lean_ppo", "drop_bootstrap_rows")] if drop else []
+    for module, name in switches:
         try:
-            from rllib_asor.rllib.overlap import overlap_sampling
-        except ImportError:  # a tree from before it existed
+            switch = getattr(importlib.import_module(f"rllib_asor.rllib.{module}"), name)
+        except (ImportError, AttributeError):  # a tree from before it existed
             ray.shutdown()
             return {"unsupported": True}
-        config = overlap_sampling(config)
-    if drop:
-        try:
-            from rllib_asor.rllib.lean_ppo import drop_bootstrap_rows
-        except ImportError:  # a tree from before it existed
-            ray.shutdown()
-            return {"unsupported": True}
-        config = drop_bootstrap_rows(config)
+        config = switch(config)
     algo = config.build_algo()
     learner_net = algo.learner_group._learner.module[DEFAULT_MODULE_ID].settings
     assert all(learner_net[k] == v for k, v in NETS[args.net].items()), learner_net

@@ -65,12 +65,22 @@ class SharedValuesGAE(GeneralAdvantageEstimation):
 
 @contextlib.contextmanager
 def _values_given(rl_module: Any, values: dict[str, torch.Tensor]) -> Iterator[None]:
-    """Within the block, `rl_module[mid].compute_values(batch)` returns `values[mid]`."""
+    """Within the block, `rl_module[mid].compute_values(batch)` returns `values[mid]` for a batch
+    of as many rows (other calls go to the module's own method)."""
     patched = []
+
+    def given(module: Any, vf: torch.Tensor) -> Callable[..., torch.Tensor]:
+        def compute_values(batch: dict[str, Any], *args: Any, **kwargs: Any) -> torch.Tensor:
+            if not args and not kwargs and len(batch[Columns.REWARDS]) == len(vf):
+                return vf
+            return type(module).compute_values(module, batch, *args, **kwargs)
+
+        return compute_values
+
     try:
         for mid, vf in values.items():
             module = rl_module[mid].unwrapped()  # what GAE's foreach_module passes
-            module.__dict__["compute_values"] = lambda batch, embeddings=None, vf=vf: vf
+            module.__dict__["compute_values"] = given(module, vf)
             patched.append(module)
         yield
     finally:

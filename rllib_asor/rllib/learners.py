@@ -203,6 +203,9 @@ class AsorLearnerMixin(SameMathSpeedMixin):
             for module_id in [m for m in module_batches if is_aux_module(m)]:
                 if self._asor_rows_trained.get(module_id, 0) >= self.aux_rows(module_id):
                     del module_batches[module_id]
+                    # Without a fixed minibatch count the iterator runs until every module it
+                    # tracks covered num_epochs: stop tracking the one that left.
+                    batch_iter._num_covered_epochs.pop(module_id, None)
 
     def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
         if self.asor_in_pipeline:

@@ -6,31 +6,21 @@ import numpy as np
 import pytest
 import torch
 import tree
-from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.connectors.learner import GeneralAdvantageEstimation
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.policy.sample_batch import SampleBatch
+from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 import rllib_asor
 import rllib_asor.envs  # noqa: F401  (registers rllib_asor/LavaWorld-v0)
 from rllib_asor.rllib.connector import SHARED_VALUES, AsorRewardConnector, SharedValuesGAE
 from rllib_asor.rllib.lean_ppo import DropMaskedRows, LeanPPOTorchLearner, drop_bootstrap_rows
 from rllib_asor.rllib.learner_speed import IndexSelectShuffleBatch, fuse_adam
+from tests.rllib.test_ppo_asor import lava_ppo_config
 
 DISC = "asor_disc.default_policy"
-
-
-def lava_ppo() -> PPOConfig:
-    return (
-        PPOConfig()
-        .environment("rllib_asor/LavaWorld-v0")
-        .env_runners(num_env_runners=0, num_envs_per_env_runner=2)
-        .training(train_batch_size=256, minibatch_size=64, num_epochs=2, lr=1e-3)
-        .rl_module(model_config={"fcnet_hiddens": [32, 32]})
-        .debugging(seed=0)
-    )
 
 
 def piece_names(algo) -> list[str]:
@@ -105,7 +95,7 @@ def test_drop_bootstrap_rows_needs_ppo():
 
 @pytest.mark.parametrize("order", ["drop_then_asor", "asor_then_drop", "no_asor"])
 def test_drop_bootstrap_rows_trains_each_valid_row_num_epochs_times(ray_session, order):
-    config = lava_ppo()
+    config = lava_ppo_config()
     if order == "drop_then_asor":
         config = rllib_asor.with_asor(drop_bootstrap_rows(config), seed=0)
     elif order == "asor_then_drop":
@@ -130,7 +120,7 @@ def test_drop_bootstrap_rows_trains_each_valid_row_num_epochs_times(ray_session,
 
 
 def test_without_the_drop_ppo_still_trains_the_masked_rows(ray_session):
-    algo = rllib_asor.with_asor(lava_ppo(), seed=0).build_algo()
+    algo = rllib_asor.with_asor(lava_ppo_config(), seed=0).build_algo()
     try:
         assert "DropMaskedRows" not in piece_names(algo)
         result = algo.train()
@@ -145,7 +135,7 @@ def test_without_the_drop_ppo_still_trains_the_masked_rows(ray_session):
 
 
 def test_gae_takes_asors_critic_values_and_computes_what_rllibs_gae_does(ray_session):
-    algo = rllib_asor.with_asor(lava_ppo(), seed=0).build_algo()
+    algo = rllib_asor.with_asor(lava_ppo_config(), seed=0).build_algo()
     try:
         learner = algo.learner_group._learner
         pieces = learner._learner_connector.connectors
@@ -190,5 +180,23 @@ def test_gae_takes_asors_critic_values_and_computes_what_rllibs_gae_does(ray_ses
             torch.testing.assert_close(
                 ours[DEFAULT_MODULE_ID][column], theirs[DEFAULT_MODULE_ID][column], rtol=0, atol=0
             )
+    finally:
+        algo.stop()
+
+
+@pytest.mark.timeout(120)
+def test_an_update_without_minibatch_size_ends_after_the_policys_epochs(ray_session):
+    """Without a minibatch size RLlib's iterator runs until every module it tracks covered
+    num_epochs; the aux modules that left after their pass must not keep it running."""
+    algo = rllib_asor.with_asor(lava_ppo_config(), seed=0).build_algo()
+    try:
+        learner = algo.learner_group._learner
+        episodes = copy.deepcopy(algo.env_runner.sample(num_timesteps=128, random_actions=False))
+        optimizer = learner.get_optimizer(module_id=DEFAULT_MODULE_ID)
+        learner.update(
+            episodes=episodes, timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: 1000}, num_epochs=3
+        )
+        steps = max(int(s["step"]) for s in optimizer.state.values())
+        assert 3 <= steps <= 4
     finally:
         algo.stop()

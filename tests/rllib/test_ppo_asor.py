@@ -23,9 +23,9 @@ from rllib_asor.rllib.learners import policy_minibatches
 DISC, PROXY = "asor_disc.default_policy", "asor_proxy.default_policy"
 
 
-def lava_ppo(**asor):
-    """PPO+ASOR on the lava world; the paper preset unless `preset` says otherwise."""
-    config = (
+def lava_ppo_config() -> PPOConfig:
+    """Plain PPO on the lava world, small and local (2 envs, batch 256, 2 epochs of 64)."""
+    return (
         PPOConfig()
         .environment("rllib_asor/LavaWorld-v0")
         .env_runners(num_env_runners=0, num_envs_per_env_runner=2)
@@ -33,6 +33,11 @@ def lava_ppo(**asor):
         .rl_module(model_config={"fcnet_hiddens": [32, 32]})
         .debugging(seed=0)
     )
+
+
+def lava_ppo(**asor):
+    """PPO+ASOR on the lava world; the paper preset unless `preset` says otherwise."""
+    config = lava_ppo_config()
     defaults = {"preset": "paper", "lambda_": 0.1, "seed": 0}
     if asor.get("preset") == "robust":
         defaults = {"seed": 0}
