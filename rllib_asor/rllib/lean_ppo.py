@@ -50,6 +50,12 @@ def drop_bootstrap_rows(config: AlgorithmConfig, enabled: bool = True) -> Algori
     config = config.copy(copy_frozen=False)
     if config._learner_class is None:
         config.learners(learner_class=LeanPPOTorchLearner)
+    elif not issubclass(config._learner_class, LeanPPOMixin):
+        raise ValueError(
+            f"drop_bootstrap_rows: the Learner class {config._learner_class.__name__} would "
+            "ignore it; mix rllib_asor.rllib.lean_ppo.LeanPPOMixin into it (before PPO's Learner) "
+            "or leave learner_class unset"
+        )
     config.learners(learner_config_dict={**(config.learner_config_dict or {}), DROP_KEY: enabled})
     return config
 

@@ -88,9 +88,13 @@ def test_drop_masked_rows_keeps_valid_rows_and_removes_the_mask():
     assert out["p"]["o"]["g"].tolist() == [[0, 1], [2, 3], [6, 7]]
 
 
-def test_drop_bootstrap_rows_needs_ppo():
+def test_drop_bootstrap_rows_needs_ppo_and_a_learner_that_reads_it():
+    from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
+
     with pytest.raises(ValueError, match="needs a PPO config, got SAC"):
         drop_bootstrap_rows(SACConfig())
+    with pytest.raises(ValueError, match="PPOTorchLearner would ignore it; mix .*LeanPPOMixin"):
+        drop_bootstrap_rows(lava_ppo_config().learners(learner_class=PPOTorchLearner))
 
 
 @pytest.mark.parametrize("order", ["drop_then_asor", "asor_then_drop", "no_asor"])
