@@ -134,9 +134,6 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
         # archive's size: ASOR's steady state has archive states in the discriminator's batch.
         "policy_rows_trained": float(policy.get("num_module_steps_trained", "nan")),
         "archive_states": float(result.get("asor", {}).get("archive_states", "nan")),
-        # RLlib's smoothed per-iteration timers (s): with the overlap, `env_runner_sampling_timer`
-        # is the wait for the runner's batch, so a non-zero value means sampling is the slower half.
-        "timers": {k: float(v) for k, v in result.get("timers", {}).items()},
     }
 
 

@@ -2,8 +2,9 @@
 
 A family names the env ids it covers (by prefix) and its defaults: extra `env_config` for
 `--test` runs, the metrics callbacks added when a YAML names none, the RLModule used when a
-YAML names none, config keys set when a YAML does not set them, and whether (and how) a `curriculum:` block is supported. Adding an env
-family means adding an entry to `FAMILIES`; the CLI has no env-specific branches.
+YAML names none, config keys set when a YAML does not set them, and whether (and how) a
+`curriculum:` block is supported. Adding an env family means adding an entry to `FAMILIES`;
+the CLI has no env-specific branches.
 """
 
 from __future__ import annotations

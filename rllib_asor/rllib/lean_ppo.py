@@ -62,16 +62,10 @@ def drop_bootstrap_rows(config: AlgorithmConfig, enabled: bool = True) -> Algori
 
 class DropMaskedRows(ConnectorV2):
     """Learner connector piece (after GAE): keeps only the rows with `loss_mask=True` of each
-    module in `module_ids` and removes the mask column (every row left is valid)."""
-
-    def __init__(self, *args: Any, module_ids: set[str] | None = None, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.module_ids = module_ids
+    non-recurrent module and removes the mask column (every row left is valid)."""
 
     def __call__(self, *, rl_module: Any, batch: dict[str, Any], **kwargs: Any) -> Any:
         for module_id, module_batch in batch.items():
-            if self.module_ids is not None and module_id not in self.module_ids:
-                continue
             if Columns.LOSS_MASK not in module_batch or rl_module[module_id].is_stateful():
                 continue
             mask = module_batch.pop(Columns.LOSS_MASK)
@@ -86,9 +80,6 @@ class LeanPPOMixin:
     """Inserts `DropMaskedRows` after GAE when `learner_config_dict[DROP_KEY]` is set. Mix in
     before the PPO Learner (and after ASOR's mixin, whose piece must see the full batch)."""
 
-    lean_module_ids: set[str] | None = None
-    """Modules whose rows are dropped (None: every module with a loss mask)."""
-
     def build(self) -> None:
         super().build()  # type: ignore[misc]
         if not drop_enabled(self.config):  # type: ignore[attr-defined]
@@ -99,7 +90,7 @@ class LeanPPOMixin:
                 f"{DROP_KEY} needs the Learner connector pipeline; "
                 "set num_aggregator_actors_per_learner=0"
             )
-        piece = DropMaskedRows(module_ids=self.lean_module_ids)
+        piece = DropMaskedRows()
         insert_beside(pipeline, GeneralAdvantageEstimation, piece, before=False)
 
 

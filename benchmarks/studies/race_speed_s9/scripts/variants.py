@@ -24,9 +24,11 @@ def _grad_batch(L):
 def apply(L, v):
     global _piece
     if _piece is None:
-        _piece = DropMaskedRows(module_ids=set())
-        insert_beside(L._learner_connector, GeneralAdvantageEstimation, _piece, before=False)
-    _piece.module_ids = None if "drop" in v else set()
+        _piece = DropMaskedRows()
+    pipeline = L._learner_connector
+    pipeline.connectors = [c for c in pipeline.connectors if c is not _piece]
+    if "drop" in v:
+        insert_beside(pipeline, GeneralAdvantageEstimation, _piece, before=False)
     fused = "old" not in v
     for opt in L._optimizer_parameters:
         for g in opt.param_groups:
