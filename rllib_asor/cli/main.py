@@ -1,4 +1,4 @@
-"""`rllib` command: argument parsing and dispatch to train / evaluate / report / data."""
+"""`rllib` command: argument parsing and dispatch to train / evaluate / report / compare / data."""
 
 from __future__ import annotations
 
@@ -21,13 +21,13 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The full `rllib` parser."""
-    from rllib_asor.cli import data, evaluate, quickstart, report, train
+    from rllib_asor.cli import compare, data, evaluate, quickstart, report, train
 
     parser = _Parser(
         prog="rllib", description="Train and evaluate RLlib (new API stack) agents, with ASOR."
     )
     parser.add_argument("--version", action="version", version=_version())
-    sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report,quickstart,data}")
+    sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report,compare,quickstart,data}")
     sub.required = True
     p_train = sub.add_parser(
         "train",
@@ -52,6 +52,11 @@ def build_parser() -> argparse.ArgumentParser:
     p_report = sub.add_parser("report", help="tables and curves from a results directory")
     report.add_arguments(p_report)
     p_report.set_defaults(func=report.run)
+    p_compare = sub.add_parser(
+        "compare", help="each method against a baseline, paired by seed (docs/report.md)"
+    )
+    compare.add_arguments(p_compare)
+    p_compare.set_defaults(func=compare.run)
     p_data = sub.add_parser("data", help="offline datasets: collect, info, score (docs/offline.md)")
     data.add_arguments(p_data, common=_add_verbose)
     p_data.set_defaults(func=data.run)
@@ -89,7 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return e.code if isinstance(e.code, int) else 2
     if getattr(args, "verbose", False):
         os.environ[quiet.VERBOSE_ENV] = "1"
-    if args.command != "report":  # the commands that run Ray
+    if args.command not in ("report", "compare"):  # the commands that run Ray
         quiet.quiet_driver()
     try:
         return int(args.func(args) or 0)

@@ -127,13 +127,21 @@ def _read_rows(path: Path, notes: list[str]) -> list[dict[str, Any]]:
 
 
 def find_trials(results_dir: str | os.PathLike[str], notes: list[str] | None = None) -> list[Trial]:
-    """All trial folders (holding ``result.json`` with at least one row) under `results_dir`."""
+    """All trial folders (holding ``result.json`` with at least one row) under `results_dir`,
+    symlinks followed (each real folder once)."""
     root = Path(results_dir).expanduser()
     notes = notes if notes is not None else []
     if not root.is_dir():
         raise ValueError(f"results directory {str(root)!r} does not exist or is not a directory")
     trials: list[Trial] = []
-    for dirpath, dirnames, filenames in os.walk(root):
+    visited: set[str] = set()
+    # Symlinked experiment folders are followed; a link back up the tree is not walked twice.
+    for dirpath, dirnames, filenames in os.walk(root, followlinks=True):
+        real = os.path.realpath(dirpath)
+        if real in visited:
+            dirnames[:] = []
+            continue
+        visited.add(real)
         dirnames[:] = sorted(d for d in dirnames if not d.startswith("checkpoint_"))
         if RESULT_FILE not in filenames:
             continue
