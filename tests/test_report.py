@@ -143,7 +143,7 @@ def fixture_results(tmp_path: Path) -> Path:
             {
                 **lava,
                 "seed": seed,
-                "learner_config_dict": {"asor": {"mode": "asor", "lambda_": 0.1 * (seed % 2 + 1)}},
+                "learner_config_dict": {"asor": {"mode": "asor", "lambda_": 0.1}},
             },
             [1.0, 2.0, final],
             extra={
@@ -327,12 +327,40 @@ def test_last_n_averages_the_last_iterations(fixture_results: Path) -> None:
     assert ppo.finals == [7.5, 15.0, 22.5]
 
 
-def test_group_by_dotted_param_key(fixture_results: Path) -> None:
+def test_group_by_dotted_param_key_still_splits_other_settings(fixture_results: Path) -> None:
     rep = summary.summarize(fixture_results, group_by="asor.lambda_")
-    methods = {(g.env, g.method): g.n for g in rep.groups}
-    assert methods[("LavaWorld-v0", "asor.lambda_=0.1")] == 3
-    assert methods[("LavaWorld-v0", "asor.lambda_=0.2")] == 2
-    assert methods[("LavaWorld-v0", "asor.lambda_=<missing>")] == 5
+    methods = {g.method: g.n for g in rep.groups if g.env == "LavaWorld-v0"}
+    assert methods == {
+        "asor.lambda_=0.1": 5,
+        "asor.lambda_=<missing>": 3,  # plain PPO
+        "asor.lambda_=<missing> (asor.mode=srpo)": 1,  # never lumped with PPO
+        "asor.lambda_=<missing> (asor.mode=count)": 1,
+    }
+
+
+def test_trials_whose_settings_differ_are_never_seeds_of_one_group(tmp_path: Path) -> None:
+    """The issue's folder: a λ sweep at another budget, a single run and three seeds, all
+    PPO+ASOR: four groups, each labelled by what sets it apart, the keys listed in report.md."""
+    asor = {"env": "MyEnv-v0", "rllib_asor_run": "PPO", "train_batch_size": 4000}
+    for lam in (0.01, 0.1, 1.0):
+        params = {**asor, "seed": 0, "train_batch_size": 2000, "asor": {"lambda_": lam}}
+        write_trial(tmp_path, "sweep", f"PPO_{lam}", params, [1.0, 2.0])
+    write_trial(tmp_path, "single", "PPO_single", {**asor, "asor": {"mode": "asor"}}, [5.0])
+    for seed in range(3):
+        params = {**asor, "seed": seed, "asor": {"mode": "asor"}}
+        write_trial(tmp_path, "seeds", f"PPO_{seed}", params, [float(seed)])
+    rep = summary.summarize(tmp_path)
+    sizes = {g.method: g.n for g in rep.groups}
+    assert sizes == {
+        # the single run (no seed set) and the three seeds: the same settings
+        "PPO+ASOR (asor.mode=asor, train_batch_size=4000)": 4,
+        "PPO+ASOR (asor.lambda_=0.01, train_batch_size=2000)": 1,
+        "PPO+ASOR (asor.lambda_=0.1, train_batch_size=2000)": 1,
+        "PPO+ASOR (asor.lambda_=1.0, train_batch_size=2000)": 1,
+    }
+    md = render.make_report(tmp_path, tmp_path / "out").read_text()
+    assert "- PPO+ASOR (asor.lambda_=0.1, train_batch_size=2000): `asor.lambda_`=0.1" in md
+    assert "scipy BCa, 5,000 resamples" in md
 
 
 def test_curves_png_per_env_and_no_temp_files_left(fixture_results: Path, tmp_path: Path) -> None:

@@ -1,8 +1,9 @@
 """`rllib report RESULTS_DIR`: markdown tables and PNG learning curves from Tune results.
 
 Reads every trial directory under RESULTS_DIR (a folder holding ``result.json``, one JSON object
-per training iteration, and ``params.json``, the trial's algorithm config), groups trials by
-env and method (``PPO``, ``PPO+ASOR``, ``SAC+SRPO``, ...) and writes ``report.md``,
+per training iteration, and ``params.json``, the trial's algorithm config; symlinks followed),
+groups trials by env, method (``PPO``, ``PPO+ASOR``, ``SAC+SRPO``, ...) and every other setting
+that differs besides the seed, and writes ``report.md``,
 ``summary.json`` and one ``curves_<env>.png`` per env into the output folder. Files are written
 atomically (temp file + ``os.replace``).
 
@@ -52,8 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--group-by",
         metavar="KEY",
         default=None,
-        help="group trials by this dotted params key (e.g. asor.lambda_) "
-        "instead of the method name",
+        help="label groups by this dotted params key (e.g. asor.lambda_) instead of the "
+        "method; trials whose other settings differ are still never lumped",
     )
     parser.add_argument(
         "--columns",

@@ -7,15 +7,12 @@ import json
 import math
 import os
 import re
-import tempfile
-import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
-import numpy as np
-
-from rllib_asor.report.results import Trial
+from rllib_asor.report.files import atomic_write, jsonable
+from rllib_asor.report.plots import plot_curves
+from rllib_asor.report.stats import BOOTSTRAP_RESAMPLES
 from rllib_asor.report.summary import DEFAULT_METRIC, DEFAULT_X, Report, summarize
 
 # --------------------------------------------------------------------------- writing
@@ -37,101 +34,17 @@ def _slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("_") or "env"
 
 
-def atomic_write(path: Path, data: bytes) -> None:
-    """Write `data` to `path` via a temp file and `os.replace` (no half-written file)."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's 0600 -> the usual mode of a new file
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _jsonable(obj: Any) -> Any:
-    """NaN/inf -> None, recursively, so summary.json is strict JSON."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    return obj
-
-
-def _curve(trial: Trial, metric: str, x: str) -> tuple[np.ndarray, np.ndarray]:
-    xs, ys = trial.series(x), trial.series(metric)
-    ok = np.isfinite(xs) & np.isfinite(ys)
-    order = np.argsort(xs[ok], kind="stable")  # np.interp needs increasing x
-    return xs[ok][order], ys[ok][order]
-
-
 def plot_env(report: Report, env: str, path: Path) -> None:
-    """One PNG: mean ± std across seeds per method over `report.x`, for one env."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import io
-
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7, 4.5), dpi=100)
-    try:
-        for g in (g for g in report.groups if g.env == env):
-            curves = [
-                _curve(t, report.metric, report.x)
-                for t in report.trials
-                if t.env == env and t.method == g.method
-            ]
-            curves = [(cx, cy) for cx, cy in curves if cx.size]
-            if not curves:
-                continue
-            hi = max(float(cx.max()) for cx, _ in curves)
-            lo = min(float(cx.min()) for cx, _ in curves)
-            grid = np.linspace(lo, hi, 200) if hi > lo else np.array([lo])
-            # Each seed is interpolated only inside the range it reached (no extrapolation).
-            ys = np.array(
-                [
-                    np.where(
-                        (grid >= cx.min()) & (grid <= cx.max()), np.interp(grid, cx, cy), np.nan
-                    )
-                    for cx, cy in curves
-                ]
-            )
-            count = np.isfinite(ys).sum(axis=0)
-            keep = count > 0
-            with warnings.catch_warnings():  # all-NaN grid columns are dropped by `keep`
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mean = np.nanmean(ys, axis=0)
-                std = np.nan_to_num(np.nanstd(ys, axis=0, ddof=1))  # sample std, as in the table
-            label = f"{g.method} (n={g.n})"
-            if keep.sum() == 1:
-                ax.errorbar(grid[keep], mean[keep], yerr=std[keep], fmt="o", label=label, capsize=3)
-            else:
-                (line,) = ax.plot(grid[keep], mean[keep], label=label)
-                ax.fill_between(
-                    grid[keep],
-                    (mean - std)[keep],
-                    (mean + std)[keep],
-                    color=line.get_color(),
-                    alpha=0.2,
-                    linewidth=0,
-                )
-        ax.set_title(f"{env}: {report.metric}")
-        ax.set_xlabel(report.x)
-        ax.set_ylabel(f"{report.metric} (mean ± std over seeds)")
-        ax.grid(alpha=0.3)
-        ax.legend(loc="best", fontsize="small")
-        fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png")
-    finally:
-        plt.close(fig)
-    atomic_write(path, buf.getvalue())
+    """One PNG for one env: per group, the mean over seeds on a grid of env steps that every
+    seed reached, with a 95% BCa band (`rllib_asor.report.plots.plot_curves`)."""
+    groups = [
+        (g.method, [t for t in report.trials if t.env == env and t.method == g.method])
+        for g in report.groups
+        if g.env == env
+    ]
+    plot_curves(
+        groups, report.metric, report.x, path, f"{env}: {report.metric}", report.notes.append
+    )
 
 
 def render_markdown(report: Report, results_dir: Path, plots: dict[str, str]) -> str:
@@ -142,13 +55,26 @@ def render_markdown(report: Report, results_dir: Path, plots: dict[str, str]) ->
         f"- results: `{results_dir}`",
         f"- metric: `{report.metric}`; final value per trial = mean of its last "
         f"{report.last_n} iteration(s)",
-        "- per method: trials (seeds), final mean ± std (sample std), 95% bootstrap CI of the "
-        "mean (BCa, 5,000 resamples), IQM (25% trimmed mean), env steps "
+        "- per group (trials whose settings differ in the seed only): trials (seeds), final "
+        "mean ± std (sample std), 95% bootstrap CI of the mean (scipy BCa, "
+        f"{BOOTSTRAP_RESAMPLES:,} resamples), IQM (25% trimmed mean), env steps "
         f"(mean final `{report.x}`)",
+        "- curves: each seed interpolated onto a grid of x values that every seed of the group "
+        "reached (a curve ends where its shortest seed ends); mean over seeds with a 95% BCa band",
+        "- training returns explore; for a paired comparison on evaluation returns use "
+        "`rllib compare` (docs/report.md)",
         "",
     ]
     for env in sorted({g.env for g in report.groups}):
         out += [f"## {env}", ""]
+        keyed = [g for g in report.groups if g.env == env and g.settings]
+        if keyed:
+            out += ["Settings that define the groups (the seed aside):", ""]
+            out += [
+                f"- {g.method}: " + ", ".join(f"`{k}`={v}" for k, v in g.settings.items())
+                for g in keyed
+            ]
+            out.append("")
         head = ["method", "trials", "final mean ± std", "95% CI", "IQM", "env steps"]
         head += [f"`{c}`" for c in report.columns]
         out += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -222,6 +148,7 @@ def make_report(
                 "env_steps": g.env_steps,
                 "finals": g.finals,
                 "extra": {k: list(v) for k, v in g.extra.items()},
+                "settings": g.settings,
             }
             for g in report.groups
         ],
@@ -229,7 +156,7 @@ def make_report(
     }
     atomic_write(
         out / "summary.json",
-        (json.dumps(_jsonable(summary), indent=2, allow_nan=False) + "\n").encode(),
+        (json.dumps(jsonable(summary), indent=2, allow_nan=False) + "\n").encode(),
     )
     md = out / "report.md"
     atomic_write(md, render_markdown(report, root, plots).encode())

@@ -41,3 +41,35 @@ def mean_std(values: Sequence[float]) -> tuple[float, float]:
     if arr.size == 0:
         return math.nan, math.nan
     return float(arr.mean()), float(arr.std(ddof=1)) if arr.size > 1 else 0.0
+
+
+def bootstrap_ci_columns(
+    values: np.ndarray, confidence: float = 0.95
+) -> tuple[np.ndarray, np.ndarray]:
+    """`bootstrap_ci` of each column's mean (rows = seeds), in one vectorised scipy call.
+
+    A constant column gets (v, v); fewer than two rows gives NaNs.
+    """
+    import warnings
+
+    from scipy.stats import bootstrap
+
+    arr = np.asarray(values, dtype=float)
+    mean = arr.mean(axis=0)
+    if arr.shape[0] < 2:
+        return np.full_like(mean, np.nan), np.full_like(mean, np.nan)
+    with warnings.catch_warnings():  # constant columns: BCa is undefined there (NaN, handled)
+        warnings.simplefilter("ignore")
+        res = bootstrap(
+            (arr,),
+            np.mean,
+            axis=0,
+            confidence_level=confidence,
+            n_resamples=BOOTSTRAP_RESAMPLES,
+            rng=0,
+        )
+    lo, hi = res.confidence_interval.low, res.confidence_interval.high
+    const = np.all(np.isclose(arr, arr[0]), axis=0)
+    return np.where(const | ~np.isfinite(lo), mean, lo), np.where(
+        const | ~np.isfinite(hi), mean, hi
+    )

@@ -1,5 +1,6 @@
-"""Summarising trials per (env, method): final values, mean ± std, bootstrap CI, IQM, and the
-extra race/... and asor/... columns."""
+"""Summarising trials per (env, group): final values, mean ± std, bootstrap CI, IQM, and the
+extra race/... and asor/... columns. A group's trials differ in the seed only
+(`rllib_asor.report.grouping`); its label is the method plus the settings that set it apart."""
 
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rllib_asor.report.results import Trial, assign_groups, find_trials
+from rllib_asor.report.grouping import group_trials
+from rllib_asor.report.results import Trial, find_trials
 from rllib_asor.report.stats import bootstrap_ci, iqm, mean_std
 
 DEFAULT_METRIC = "env_runners/episode_return_mean"
@@ -43,6 +45,8 @@ class GroupStats:
     finals: list[float]
     extra: dict[str, tuple[float, float]] = field(default_factory=dict)
     """Extra column key -> (mean, std) over the group's trials that report it."""
+    settings: dict[str, str] = field(default_factory=dict)
+    """The params keys (and values) that tell this group apart from the env's other groups."""
 
 
 @dataclass
@@ -96,7 +100,7 @@ def summarize(
         raise ValueError(f"last_n must be >= 1, got {last_n}")
     notes: list[str] = []
     trials = find_trials(results_dir, notes)
-    assign_groups(trials, group_by)
+    settings = {(g.env, g.label): g.settings for g in group_trials(trials, group_by)}
 
     with_metric = [t for t in trials if t.has(metric)]
     if not with_metric:
@@ -133,7 +137,8 @@ def summarize(
         extra = {c: mean_std([t.final(c, last_n) for t in members]) for c in columns}
         groups.append(
             GroupStats(
-                env, method, len(members), mean, std, lo, hi, iqm(finals), steps, finals, extra
+                env, method, len(members), mean, std, lo, hi, iqm(finals), steps, finals, extra,
+                settings[(env, method)],
             )
-        )
+        )  # fmt: skip
     return Report(metric, x, last_n, groups, with_metric, list(columns), notes)
