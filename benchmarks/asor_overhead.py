@@ -27,7 +27,7 @@ def build(env: str, asor: bool, args: argparse.Namespace) -> Any:
     import rllib_asor
 
     if env.startswith("game_env/"):
-        from rllib_asor.rllib.race import RACE_ASOR_OBS_KEYS, race_ppo_config
+        from rllib_asor.race.config import RACE_ASOR_OBS_KEYS, race_ppo_config
 
         config = race_ppo_config(num_racers=1)
         extra = {"obs_keys": list(RACE_ASOR_OBS_KEYS)}
@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     import rllib_asor.envs  # noqa: F401
 
     start_local_ray(4)
-    from rllib_asor.rllib.env_registration import register_with_tune
+    from rllib_asor.registry.envs import register_with_tune
 
     register_with_tune(args.env)  # remote env runners build our ids through Tune's registry
     algos = {"PPO": build(args.env, False, args), "PPO+ASOR": build(args.env, True, args)}

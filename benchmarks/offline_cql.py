@@ -39,7 +39,7 @@ def cql_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
     from ray.rllib.algorithms.cql import CQLConfig
 
     import rllib_asor
-    from rllib_asor.rllib.offline import offline_input
+    from rllib_asor.algorithms.cql.offline import offline_input
 
     config = (
         CQLConfig()

@@ -37,7 +37,7 @@ from benchmarks.common import (
     write_json,
 )
 from benchmarks.lava_reproduction import parse_method
-from rllib_asor.evaluation.race import COLUMNS, evaluate, module_policy
+from rllib_asor.race.evaluation import COLUMNS, evaluate, module_policy
 
 DEFAULT_METHODS = (
     "ppo",
@@ -50,7 +50,7 @@ DEFAULT_METHODS = (
 
 def model_config_arg(text: str) -> str:
     """argparse type of `--model-config`: JSON of valid race network settings, kept as text."""
-    from rllib_asor.models.race_net import DEFAULTS, race_net_settings
+    from rllib_asor.race.net import DEFAULTS, race_net_settings
 
     try:
         settings = json.loads(text)
@@ -78,7 +78,7 @@ def run_settings(args: argparse.Namespace) -> dict[str, Any]:
 def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace) -> Any:
     """The shared PPO config (identical for every method), plus ASOR when given."""
     import rllib_asor
-    from rllib_asor.rllib.race import RACE_ASOR_OBS_KEYS, race_ppo_config
+    from rllib_asor.race.config import RACE_ASOR_OBS_KEYS, race_ppo_config
 
     config = (
         race_ppo_config(
@@ -101,7 +101,7 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
         .debugging(seed=seed)
     )
     if getattr(args, "sampling", "local") == "overlap":
-        from rllib_asor.rllib.overlap import overlap_sampling
+        from rllib_asor.algorithms.ppo.overlap import overlap_sampling
 
         config = overlap_sampling(
             config.env_runners(
@@ -109,7 +109,7 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
             )
         )
     if run_settings(args)["drop_bootstrap_rows"]:
-        from rllib_asor.rllib.lean_ppo import drop_bootstrap_rows
+        from rllib_asor.algorithms.ppo.lean import drop_bootstrap_rows
 
         config = drop_bootstrap_rows(config)
     if asor is not None:
@@ -148,7 +148,7 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
     import torch
     from ray import tune
 
-    from rllib_asor.rllib.race import register_race_envs
+    from rllib_asor.race.config import register_race_envs
 
     torch.set_num_threads(1)
     register_race_envs()
@@ -276,14 +276,14 @@ def main(argv: list[str] | None = None) -> int:
         "--curriculum",
         default=None,
         help='a map curriculum as JSON, e.g. \'{"stages": [[2, 6], "random"], "threshold": 0.5}\' '
-        "(rllib_asor.rllib.curriculum.MapCurriculum); evaluation is always on all ten maps",
+        "(rllib_asor.race.curriculum.MapCurriculum); evaluation is always on all ten maps",
     )
     parser.add_argument(
         "--model-config",
         type=model_config_arg,
         default=None,
         help='race network settings as JSON, e.g. \'{"cnn_channels": [8, 16], "attn_token_size": 8}\' '
-        "(rllib_asor.models.race_net.DEFAULTS); default: the network of the tuned examples",
+        "(rllib_asor.race.net.DEFAULTS); default: the network of the tuned examples",
     )
     parser.add_argument("--eval-episodes", type=int, default=1, help="episodes per map")
     parser.add_argument("--greedy", action="store_true", help="evaluate the argmax policy")
@@ -297,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--drop-bootstrap-rows",
         action="store_true",
-        help="PPO trains without its masked bootstrap rows (rllib_asor.rllib.lean_ppo)",
+        help="PPO trains without its masked bootstrap rows (rllib_asor.algorithms.ppo.lean)",
     )
     parser.add_argument(
         "--parallel",

@@ -48,8 +48,8 @@ LAYOUTS = {
     "overlap2": (2, 8, True, False),
     "overlap1drop": (1, 16, True, True),
 }
-"""Layout → (env runners, envs per runner, overlapped sampling: rllib_asor/rllib/overlap.py,
-PPO without its masked bootstrap rows: rllib_asor/rllib/lean_ppo.py)."""
+"""Layout → (env runners, envs per runner, overlapped sampling: rllib_asor/algorithms/ppo/overlap.py,
+PPO without its masked bootstrap rows: rllib_asor/algorithms/ppo/lean.py)."""
 
 NETS: dict[str, dict[str, Any]] = {
     "default": {},
@@ -75,7 +75,7 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
     )
     asor = None if args.no_asor else {"mode": "asor"}
     if net := NETS[args.net]:  # through race_ppo_config, which every tree's race_config calls
-        import rllib_asor.rllib.race as race
+        import rllib_asor.race.config as race
 
         base_config = race.race_ppo_config
 
@@ -90,12 +90,17 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
             num_envs_per_env_runner=envs,
             num_cpus_per_env_runner=1 / runners,
         )
-    switches = [("overlap", "overlap_sampling")] if overlap else []
-    switches += [("lean_ppo", "drop_bootstrap_rows")] if drop else []
-    for module, name in switches:
-        try:
-            switch = getattr(importlib.import_module(f"rllib_asor.rllib.{module}"), name)
-        except (ImportError, AttributeError):  # a tree from before it existed
+    switches = [(("algorithms.ppo.overlap", "rllib.overlap"), "overlap_sampling")] if overlap else []
+    switches += [(("algorithms.ppo.lean", "rllib.lean_ppo"), "drop_bootstrap_rows")] if drop else []
+    for modules, name in switches:
+        switch = None
+        for module in modules:  # this tree's path, then the one before issue 22
+            try:
+                switch = getattr(importlib.import_module(f"rllib_asor.{module}"), name)
+                break
+            except (ImportError, AttributeError):
+                continue
+        if switch is None:  # a tree from before it existed
             ray.shutdown()
             return {"unsupported": True}
         config = switch(config)

@@ -14,7 +14,7 @@ Runners (`--runners`):
 - `rllib_stock`: RLlib 2.60 `SACConfig` as a user writes it today (EpisodeReplayBuffer, RLlib's
   own training step: one Learner call per gradient step, episodes through the learner connector).
 - `rllib`: the same config through `rllib_asor.fast_off_policy(config)` (the fast path the SAC
-  tuned examples and `with_asor` use; rllib_asor/rllib/fast_sac.py).
+  tuned examples and `with_asor` use; rllib_asor/algorithms/sac/fast.py).
 - `asor_stock`: ASOR on RLlib's stock path (`learner_config_dict["fast_off_policy"] = False`).
 - `asor`: `rllib_asor.with_asor(config)` (the robust default; fast path by default: the
   discriminator and RND take one minibatch per Learner call of 16 SAC steps).
@@ -131,7 +131,7 @@ class RllibRunner:
 
     def __init__(self, name: str, args: argparse.Namespace) -> None:
         import rllib_asor
-        from rllib_asor.rllib.fast_sac import fast_off_policy
+        from rllib_asor.algorithms.sac.fast import fast_off_policy
 
         config = sac_config(args)
         if name == "rllib":
@@ -289,7 +289,7 @@ def cql_update_speed(args: argparse.Namespace) -> dict[str, Any]:
 
     import rllib_asor
     import rllib_asor.envs  # noqa: F401
-    from rllib_asor.rllib.fast_sac import fast_off_policy
+    from rllib_asor.algorithms.sac.fast import fast_off_policy
 
     env = gym.make(ENV_ID)
     base = (

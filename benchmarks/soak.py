@@ -201,8 +201,8 @@ def build_algo(args: argparse.Namespace) -> Any:
     from ray.rllib.algorithms.ppo import PPOConfig
 
     import rllib_asor
-    from rllib_asor.rllib.env_registration import register_with_tune
-    from rllib_asor.rllib.faults import with_fault_tolerance
+    from rllib_asor.algorithms.common.faults import with_fault_tolerance
+    from rllib_asor.registry.envs import register_with_tune
 
     env = "rllib_asor/LavaWorld-v0"
     register_with_tune(env)  # remote EnvRunners build it through Tune's registry

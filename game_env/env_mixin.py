@@ -76,7 +76,7 @@ class RaceSimEnvMixin:
     def set_map_choice(self, map_id: Any) -> None:
         """Change the maps drawn from at the next reset (as the ``map_id`` argument: an int,
         a list of ints, or None/"random"); the running episode is not touched. Curricula
-        (`rllib_asor.rllib.curriculum`) call this on every env."""
+        (`rllib_asor.race.curriculum`) call this on every env."""
         self._map_choice = check_map_choice(map_id)
 
     def _chase_frame(self, racer_pos: np.ndarray) -> np.ndarray | None:

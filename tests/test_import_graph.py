@@ -116,3 +116,48 @@ def test_the_walk_sees_local_imports_and_finds_cycles(tmp_path, monkeypatch):
     graph = import_graph("pkg")
     assert graph == {"pkg": {"pkg.a"}, "pkg.a": {"pkg.b"}, "pkg.b": {"pkg.a"}, "pkg.c": {"pkg.a"}}
     assert cycles(graph) == [["pkg.a", "pkg.b"]]
+
+
+# Layers, top to bottom: a module may import its own layer and the layers below, never above.
+LAYERS = [
+    ("rllib_asor.cli",),
+    ("rllib_asor.report",),
+    ("rllib_asor.rllib", "rllib_asor.registry"),  # ASOR glue, env ids for Tune
+    ("rllib_asor.algorithms", "rllib_asor.race", "rllib_asor.models", "rllib_asor.data"),
+    ("rllib_asor.evaluation",),
+    ("rllib_asor.asor", "rllib_asor.envs", "game_env"),
+]
+
+
+def _layer(module: str) -> int | None:
+    for depth, prefixes in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return depth
+    return None
+
+
+def test_imports_point_down_the_layers():
+    graph = {**import_graph("rllib_asor"), **import_graph("game_env")}
+    upward = []
+    for module, targets in graph.items():
+        here = _layer(module)
+        for target in targets:
+            there = _layer(target)
+            if here is not None and there is not None and there < here:
+                upward.append(f"{module} -> {target}")
+    assert not upward, f"imports from a lower layer to a higher one: {upward}"
+
+
+def test_algorithms_know_nothing_of_asor_and_the_core_no_ray():
+    graph = import_graph("rllib_asor")
+    for module, targets in graph.items():
+        if module.startswith("rllib_asor.algorithms"):
+            assert not {
+                t for t in targets if t.startswith(("rllib_asor.rllib", "rllib_asor.asor"))
+            }, module
+    for module, path in modules("rllib_asor").items():
+        if module.startswith(("rllib_asor.asor", "rllib_asor.envs")):
+            tree = ast.parse(path.read_text())
+            names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+            names |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+            assert not {n for n in names if n == "ray" or n.startswith("ray.")}, module

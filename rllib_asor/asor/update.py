@@ -100,6 +100,53 @@ class AsorBatch:
     """Episode chunks in row order (the archive and the warm-up; on-policy only)."""
 
 
+def concat_batches(batches: Sequence[AsorBatch]) -> AsorBatch:
+    """One `AsorBatch` of the rows of `batches` in order (chunks shifted to their rows).
+
+    Several Learners each hold a shard of the train batch; run on the concatenation, the same
+    update gives every Learner the same state (docs/algorithm.md, "Many Learners"). Optional
+    fields are kept only when every batch has them; `gamma` and `timestep` come from the first.
+    """
+    if not batches:
+        raise ValueError("concat_batches needs at least one AsorBatch")
+    first = batches[0]
+
+    def cat(get: Callable[[Any], Any]) -> Any:
+        parts = [get(b) for b in batches]
+        return None if any(p is None for p in parts) else torch.cat(parts)
+
+    chunks: list[Chunk] | None = []
+    offset = 0
+    for b in batches:
+        if b.chunks is None or chunks is None:
+            chunks = None
+        else:
+            chunks += [
+                Chunk(c.key, c.start + offset, c.stop + offset, c.dynamics_id) for c in b.chunks
+            ]
+        offset += b.features.shape[0]
+    proxy = None
+    if all(b.proxy_inputs is not None for b in batches):
+        proxy = ProxyInputs(
+            cat(lambda b: b.proxy_inputs.features),
+            cat(lambda b: b.proxy_inputs.actions),
+            cat(lambda b: b.proxy_inputs.next_features),
+            cat(lambda b: b.proxy_inputs.dynamics_ids),
+        )
+    return AsorBatch(
+        features=cat(lambda b: b.features),
+        env_rewards=cat(lambda b: b.env_rewards),
+        values=cat(lambda b: b.values),
+        gamma=first.gamma,
+        timestep=first.timestep,
+        proxy_inputs=proxy,
+        next_features=cat(lambda b: b.next_features),
+        terminateds=cat(lambda b: b.terminateds),
+        next_values=cat(lambda b: b.next_values),
+        chunks=chunks,
+    )
+
+
 @dataclass
 class AsorResult:
     """What the caller applies and trains."""

@@ -104,7 +104,7 @@ def evaluate(
     from ray.rllib.algorithms.algorithm import Algorithm
 
     from rllib_asor.cli.cluster import start_ray
-    from rllib_asor.rllib import env_registration as envs
+    from rllib_asor.registry import envs
 
     quiet.import_quietly("ray.rllib.algorithms.dreamerv3.utils.debugging")  # see its docstring
     config = _local_config(path, seed)

@@ -53,6 +53,25 @@ RENAMED_SPEC_KEYS: dict[str, tuple[str, str]] = {
     "local_dir": ("", "storage_path"),
 }
 
+# Our own class paths before issue 22's layout -> where they live now (YAML files keep working).
+MOVED_MODULES: dict[str, str] = {
+    "rllib_asor.rllib.learner_speed": "rllib_asor.algorithms.common.learner_speed",
+    "rllib_asor.rllib.pipeline": "rllib_asor.algorithms.common.pipeline",
+    "rllib_asor.rllib.faults": "rllib_asor.algorithms.common.faults",
+    "rllib_asor.rllib.lean_ppo": "rllib_asor.algorithms.ppo.lean",
+    "rllib_asor.rllib.overlap": "rllib_asor.algorithms.ppo.overlap",
+    "rllib_asor.rllib.fast_sac": "rllib_asor.algorithms.sac.fast",
+    "rllib_asor.rllib.replay": "rllib_asor.algorithms.sac.replay",
+    "rllib_asor.rllib.offline": "rllib_asor.algorithms.cql.offline",
+    "rllib_asor.rllib.race": "rllib_asor.race.config",
+    "rllib_asor.rllib.curriculum": "rllib_asor.race.curriculum",
+    "rllib_asor.models.race_net": "rllib_asor.race.net",
+    "rllib_asor.models.multi_categorical": "rllib_asor.race.action_dist",
+    "rllib_asor.evaluation.race": "rllib_asor.race.evaluation",
+    "rllib_asor.rllib.env_registration": "rllib_asor.registry.envs",
+    "rllib_asor.rllib.env_families": "rllib_asor.registry.families",
+}
+
 OBSERVATION_FILTERS = ("NoFilter", "MeanStdFilter")
 # `config.rl_module: {module_class: NAME, model_config: {...}}` (NAME: rllib_asor.models registry).
 RL_MODULE_KEYS = ("module_class", "model_config")
@@ -152,7 +171,22 @@ def translate_config(
             out[key] = value
     if model_config:
         out["model_config"] = model_config
-    return out, warnings
+    return _moved_paths(out, source, warnings), warnings
+
+
+def _moved_paths(value: Any, source: str, warnings: list[str]) -> Any:
+    """`value` with every string naming one of our moved modules rewritten to its new path."""
+    if isinstance(value, dict):
+        return {k: _moved_paths(v, source, warnings) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_moved_paths(v, source, warnings) for v in value]
+    if isinstance(value, str):
+        for old, new in MOVED_MODULES.items():
+            if value == old or value.startswith((old + ".", old + ":")):
+                moved = new + value[len(old) :]
+                warnings.append(f"{source}: class path '{value}' moved to '{moved}'")
+                return moved
+    return value
 
 
 def _check_model_key(key: str, source: str, shown: str) -> None:

@@ -20,7 +20,7 @@ from typing import Any
 
 from rllib_asor.cli import experiment, train
 from rllib_asor.cli.errors import UsageError
-from rllib_asor.rllib.env_families import RACE, family_of
+from rllib_asor.registry.families import RACE, family_of
 
 DEFAULT_FILE = "tuned_examples/race/ppo-asor-quickstart.yaml"
 FULL_RUN = "tuned_examples/race/ppo-asor-curriculum.yaml"
@@ -120,7 +120,7 @@ def _evaluate_and_record(
     checkpoint: str, out: Path, episodes: int, max_steps: int
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The race evaluation (stochastic policy, as the studies) and a GIF; their files."""
-    from rllib_asor.evaluation.race import evaluate, load_module, module_policy, record_gif
+    from rllib_asor.race.evaluation import evaluate, load_module, module_policy, record_gif
 
     policy = module_policy(load_module(checkpoint), explore=True)
     evaluation = evaluate(policy, episodes, max_steps)
@@ -137,7 +137,7 @@ def _evaluate_and_record(
 
 
 def _evaluation_table(evaluation: dict[str, Any]) -> str:
-    from rllib_asor.evaluation.race import COLUMNS
+    from rllib_asor.race.evaluation import COLUMNS
 
     rows = ["| map | " + " | ".join(t for _, t in COLUMNS) + " |", "|---|" + "---|" * len(COLUMNS)]
     for m, values in [*evaluation["per_map"].items(), ("mean", evaluation["mean"])]:
@@ -150,7 +150,7 @@ def _evaluation_section(evaluation: dict[str, Any], max_steps: int) -> str:
     return (
         f"\n## Evaluation on unseen courses\n\n{n} episodes ({n // len(evaluation['per_map'])} "
         f"per map, course seeds never drawn in training, stochastic policy, at most {max_steps} "
-        f"steps), `rllib_asor.evaluation.race`:\n\n{_evaluation_table(evaluation)}"
+        f"steps), `rllib_asor.race.evaluation`:\n\n{_evaluation_table(evaluation)}"
     )
 
 

@@ -164,7 +164,7 @@ def _fit(exp: experiment.Experiment, algo_config: Any, args: argparse.Namespace)
     from ray import tune
 
     from rllib_asor.cli.progress import LineReporter
-    from rllib_asor.rllib import env_registration as envs
+    from rllib_asor.registry import envs
 
     envs.register_with_tune(exp.env)
     trainable = _trainable(exp)

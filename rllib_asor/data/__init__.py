@@ -4,5 +4,5 @@
 - `collect`: training the policies per dynamics and sampling the datasets (`rllib data collect`);
 - `scoring`: D4RL-style normalised scores of a policy (`rllib data score`).
 
-`rllib_asor.rllib.offline.offline_input` points an offline RLlib config at a dataset.
+`rllib_asor.algorithms.cql.offline.offline_input` points an offline RLlib config at a dataset.
 """

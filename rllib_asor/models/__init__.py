@@ -1,4 +1,4 @@
-"""RLModules for our observation spaces (the race network); `registry` maps names to them."""
+"""Names of RLModules a YAML can give (`module_class: race_net`); `registry` maps them to classes."""
 
 from rllib_asor.models.registry import MODULES, get_module_class
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 
-MODULES: dict[str, str] = {"race_net": "rllib_asor.models.race_net:RaceNetModule"}
+MODULES: dict[str, str] = {"race_net": "rllib_asor.race.net:RaceNetModule"}
 """Registered short names and the `module:Class` path each stands for."""
 
 

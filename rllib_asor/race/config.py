@@ -27,9 +27,9 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
 from ray.rllib.policy.policy import PolicySpec
 
-from rllib_asor.models.race_net import RaceNetModule
-from rllib_asor.rllib.callbacks import add_callbacks
-from rllib_asor.rllib.curriculum import MapCurriculum, map_curriculum_callback
+from rllib_asor.algorithms.common.callbacks import add_callbacks
+from rllib_asor.race.curriculum import MapCurriculum, map_curriculum_callback
+from rllib_asor.race.net import RaceNetModule
 
 SINGLE_ENV = "game_env/ObstacleRace-v0"
 """Tune name of the single-racer env (same as its gymnasium id)."""
@@ -108,7 +108,7 @@ def register_race_envs() -> None:
 PER_MAP_METRICS = ("success_rate", "goal_reward")
 """Also logged per map as ``race/map_<m>/<name>`` (windowed means), with lifetime totals
 ``race/map_<m>/episodes|success_sum|goal_reward_sum`` that a map curriculum
-(`rllib_asor.rllib.curriculum`) judges its stages by."""
+(`rllib_asor.race.curriculum`) judges its stages by."""
 
 
 def _last_info(agent_episode: Any) -> Mapping[str, Any] | None:
@@ -210,9 +210,9 @@ def race_ppo_config(
         map_id: 0..9, or None / "random" for a random map per episode (the env's rule).
         max_episode_steps: episode length limit (None: the env's default, 1000).
         env_config: further env keyword arguments (``course_seed``, ``frame_skip``, ...).
-        model_config: `RaceNetModule` settings (see `rllib_asor.models.race_net.DEFAULTS`).
+        model_config: `RaceNetModule` settings (see `rllib_asor.race.net.DEFAULTS`).
         curriculum: a `MapCurriculum` (or its dict, as the YAML block) to train over maps
-            in stages (`rllib_asor.rllib.curriculum`); its stages override `map_id`.
+            in stages (`rllib_asor.race.curriculum`); its stages override `map_id`.
 
     Registers the race envs with Tune. Set training/env-runner settings on the result.
     """

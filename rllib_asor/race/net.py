@@ -41,7 +41,7 @@ from ray.rllib.core.rl_module.rl_module import RLModule
 from ray.rllib.core.rl_module.torch import TorchRLModule
 from torch import nn
 
-from rllib_asor.models.multi_categorical import PaddedMultiCategorical
+from rllib_asor.race.action_dist import PaddedMultiCategorical
 
 MAP_KEYS: tuple[str, ...] = ("terrain", "items", "targets", "goals")
 """Grid observations (channels first), each through its own CNN."""

@@ -21,24 +21,24 @@ def import_registering_modules() -> None:
 
 
 def race_creators() -> dict[str, Any]:
-    """Tune name -> creator of the race envs (`rllib_asor.rllib.race`); {} without game_env."""
+    """Tune name -> creator of the race envs (`rllib_asor.race.config`); {} without game_env."""
     try:
         import game_env  # noqa: F401
-        from rllib_asor.rllib import race
+        from rllib_asor.race import config as race
     except ImportError:
         return {}
     return {race.SINGLE_ENV: race.make_single_race_env, race.MULTI_ENV: race.make_multi_race_env}
 
 
 def register_race_envs() -> None:
-    """`rllib_asor.rllib.race.register_race_envs()` when game_env is installed.
+    """`rllib_asor.race.config.register_race_envs()` when game_env is installed.
 
     The race's own creators hand `max_episode_steps` to the env (a plain `gym.make` would
     only wrap a TimeLimit the env does not see, losing the end-of-episode metrics) and add
     the multi-racer PettingZoo env `game_env/ObstacleRaceMulti-v0`.
     """
     if race_creators():
-        from rllib_asor.rllib.race import register_race_envs as register
+        from rllib_asor.race.config import register_race_envs as register
 
         register()
 

@@ -38,13 +38,13 @@ class EnvFamily:
 
 
 def _race_metrics() -> type:
-    from rllib_asor.rllib.race import RaceMetricsCallback
+    from rllib_asor.race.config import RaceMetricsCallback
 
     return RaceMetricsCallback
 
 
 def _race_curriculum(block: Mapping[str, Any]) -> type:
-    from rllib_asor.rllib.curriculum import MapCurriculum, map_curriculum_callback
+    from rllib_asor.race.curriculum import MapCurriculum, map_curriculum_callback
 
     return map_curriculum_callback(MapCurriculum.from_dict(dict(block)))
 

@@ -28,20 +28,6 @@ ASOR_METRICS = frozenset(
 )  # fmt: skip
 
 
-def add_callbacks(config: Any, *classes: type) -> Any:
-    """Append callback classes to `config`'s own (one class, a list, or none), each once and
-    after the others; RLlib's bare `RLlibCallback` default is dropped. Returns `config`."""
-    existing = config.callbacks_class
-    if existing is None:
-        kept: list[type] = []
-    elif isinstance(existing, list | tuple):
-        kept = list(existing)
-    else:
-        kept = [existing]
-    kept = [c for c in kept if c is not RLlibCallback and c not in classes]
-    return config.callbacks(callbacks_class=[*kept, *classes])
-
-
 def lift_asor_metrics(result: dict[str, Any]) -> dict[str, Any]:
     """Collect `learners/asor_*.<pid>/*` into a dict keyed by pid (flat for one policy)."""
     per_policy: dict[str, dict[str, Any]] = {}

@@ -30,7 +30,13 @@ from ray.rllib.core.columns import Columns
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.encoding import flatten, select, select_space
 from rllib_asor.asor.proxy import ProxyInputs
-from rllib_asor.asor.update import AsorBatch, Chunk, asor_update
+from rllib_asor.asor.update import AsorBatch, Chunk, asor_update, concat_batches
+from rllib_asor.rllib.distributed import (
+    even_share,
+    even_share_inputs,
+    gather_batches,
+    rank_and_size,
+)
 from rllib_asor.rllib.modules import DYNAMICS_ID, LABEL, proxy_batch
 
 ValueFn = Callable[[Any, dict[str, Any]], torch.Tensor]
@@ -147,8 +153,10 @@ class AsorRewardConnector(ConnectorV2):
         shared_data: dict | None = None,
         **kwargs: Any,
     ) -> Any:
-        for policy_id, ids in self.aux_ids.items():
-            if policy_id in batch:
+        rank, size = rank_and_size()
+        for policy_id, ids in sorted(self.aux_ids.items()):
+            # Several Learners: every one takes part in every policy's (collective) update.
+            if policy_id in batch or size > 1:
                 values = self._augment(rl_module, batch, policy_id, ids, episodes, metrics)
                 if shared_data is not None and values is not None:
                     shared_data.setdefault(SHARED_VALUES, {})[policy_id] = values
@@ -166,6 +174,56 @@ class AsorRewardConnector(ConnectorV2):
     ) -> torch.Tensor | None:
         """Augments the rewards of `policy_id`; returns the critic's values of every row when
         `value_fn` is `critic_values` (what GAE computes next), else None."""
+        state = rl_module[ids.disc].unwrapped().state
+        proxy = rl_module[ids.proxy].unwrapped().proxy if ids.proxy is not None else None
+        built = (
+            self._asor_batch(rl_module, batch, policy_id, episodes) if policy_id in batch else None
+        )
+        rank, size = rank_and_size()
+        if size == 1:
+            asor_batch, proxy_in = built[0], built[0].proxy_inputs
+            result = asor_update(self.asor, state, proxy, asor_batch, self._rng)
+            own_delta, disc_feats, disc_labels = (
+                result.reward_delta,
+                result.disc_features,
+                result.disc_labels,
+            )
+        else:  # the same update on every Learner, on all their rows (distributed.py)
+            device = next(state.parameters()).device
+            shards = gather_batches(None if built is None else built[0], device)
+            present = [b for b in shards if b is not None]
+            if not present:
+                return None
+            whole = concat_batches(present)
+            result = asor_update(self.asor, state, proxy, whole, self._rng)
+            offset = sum(b.features.shape[0] for b in shards[:rank] if b is not None)
+            own_delta = None
+            if built is not None:
+                own_delta = result.reward_delta[offset : offset + built[0].features.shape[0]]
+            disc_feats = even_share(result.disc_features, rank, size)
+            disc_labels = even_share(result.disc_labels, rank, size)
+            proxy_in = even_share_inputs(
+                whole.proxy_inputs or ProxyInputs(whole.features), rank, size
+            )
+
+        if built is not None:
+            self._add_to_rewards(batch[policy_id], policy_id, built[1], own_delta)
+        batch[ids.disc] = {Columns.OBS: disc_feats, LABEL: disc_labels}
+        self.aux_batch_sizes[ids.disc] = disc_feats.shape[0]
+        if ids.proxy is not None:
+            batch[ids.proxy] = proxy_batch(proxy_in)
+            self.aux_batch_sizes[ids.proxy] = proxy_in.features.shape[0]
+        if metrics is not None and result.metrics:
+            metrics.log_dict(result.metrics, key=ids.disc, window=1)
+        if built is None or self.value_fn is not critic_values:
+            return None
+        return built[2]
+
+    def _asor_batch(
+        self, rl_module: Any, batch: dict, policy_id: str, episodes: Any
+    ) -> tuple[AsorBatch, torch.Tensor, torch.Tensor]:
+        """(`AsorBatch` of the policy's valid rows, those rows' indices, the critic's raw
+        values of every row)."""
         cfg = self.asor
         pb = batch[policy_id]
         policy = rl_module[policy_id].unwrapped()
@@ -225,25 +283,20 @@ class AsorRewardConnector(ConnectorV2):
             asor_batch.chunks = self._chunks(episodes, policy_id, valid)
         else:  # off-policy / offline: each row is a transition with its own s′
             asor_batch.next_features = next_features
-        state = rl_module[ids.disc].unwrapped().state
-        proxy = rl_module[ids.proxy].unwrapped().proxy if ids.proxy is not None else None
-        result = asor_update(cfg, state, proxy, asor_batch, self._rng)
+        return asor_batch, rows, raw_values
 
-        added = torch.zeros(n, dtype=rewards.dtype, device=rewards.device)
-        added[rows] = result.reward_delta.to(rewards.dtype)
-        pb[Columns.REWARDS] = rewards + added.reshape(lead)
+    def _add_to_rewards(
+        self, pb: dict, policy_id: str, rows: torch.Tensor, delta: torch.Tensor
+    ) -> None:
+        """rewards[rows] += delta (the valid rows of the policy's batch)."""
+        rewards = pb[Columns.REWARDS]
+        added = torch.zeros(rewards.numel(), dtype=rewards.dtype, device=rewards.device)
+        added[rows] = delta.to(rewards.dtype)
+        pb[Columns.REWARDS] = rewards + added.reshape(rewards.shape)
         if not torch.isfinite(pb[Columns.REWARDS]).all():
             raise ValueError(
                 f"ASOR: rewards of policy {policy_id!r} are NaN/inf after augmentation"
             )
-        batch[ids.disc] = {Columns.OBS: result.disc_features, LABEL: result.disc_labels}
-        self.aux_batch_sizes[ids.disc] = result.disc_features.shape[0]
-        if ids.proxy is not None:
-            batch[ids.proxy] = proxy_batch(proxy_in)
-            self.aux_batch_sizes[ids.proxy] = features.shape[0]
-        if metrics is not None and result.metrics:
-            metrics.log_dict(result.metrics, key=ids.disc, window=1)
-        return raw_values if self.value_fn is critic_values else None
 
     def _chunks(self, episodes: Any, policy_id: str, valid: torch.Tensor) -> list[Chunk] | None:
         """The batch's episode chunks of `policy_id` in row order (valid-row indices), or None

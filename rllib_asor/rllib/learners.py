@@ -15,7 +15,6 @@ import math
 from typing import Any
 
 import gymnasium as gym
-import numpy as np
 import torch
 from ray.rllib.algorithms.cql.torch.cql_torch_learner import CQLTorchLearner
 from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
@@ -30,11 +29,16 @@ from ray.rllib.connectors.learner.add_next_observations_from_episodes_to_train_b
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.training_data import TrainingData
 from ray.rllib.core.models.base import ENCODER_OUT
-from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
+from rllib_asor.algorithms.common.ddp import SortedModuleGradientsMixin
+from rllib_asor.algorithms.common.learner_speed import SameMathSpeedMixin
+from rllib_asor.algorithms.common.pipeline import insert_beside
+from rllib_asor.algorithms.ppo.lean import LeanPPOMixin
+from rllib_asor.algorithms.sac.learner import FastSACLearnerMixin
+from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.rllib.connector import (
     AddDynamicsIdsToBatch,
@@ -43,10 +47,6 @@ from rllib_asor.rllib.connector import (
     SharedValuesGAE,
     critic_values,
 )
-from rllib_asor.rllib.lean_ppo import LeanPPOMixin
-from rllib_asor.rllib.learner_speed import SameMathSpeedMixin
-from rllib_asor.rllib.pipeline import insert_beside
-from rllib_asor.rllib.replay import MINIBATCH_KEY, FlatTransitions
 
 DISC_PREFIX = "asor_disc."
 PROXY_PREFIX = "asor_proxy."
@@ -265,9 +265,10 @@ def soft_q_state_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
     return module.compute_q_values({**obs, Columns.ACTIONS: action})
 
 
-class _SoftQAsorMixin(AsorLearnerMixin):
+class _SoftQAsorMixin(AsorLearnerMixin, SortedModuleGradientsMixin):
     """SAC-family Learners: V(s) from the critics; aux losses fed to SAC's per-optimizer
-    gradient loop (it pops `_temp_losses[(module_id, "<optimizer>_loss")]`)."""
+    gradient loop (it pops `_temp_losses[(module_id, "<optimizer>_loss")]`), module by module
+    in the same order on every Learner (algorithms/common/ddp.py)."""
 
     asor_insert_before = None  # after NumpyToTensor, at the end of the pipeline (no GAE)
 
@@ -282,89 +283,13 @@ class _SoftQAsorMixin(AsorLearnerMixin):
         return losses
 
 
-class FastSACLearnerMixin(SameMathSpeedMixin):
-    """Builds the train batch straight from `FlatReplayBuffer` samples (`FlatTransitions`),
-    skipping the learner connector's per-episode walk; other data goes the usual way.
-
-    The batch has exactly the columns RLlib's SAC pipeline makes for n_step 1 (obs, new_obs,
-    actions, rewards, terminateds, truncateds, n_step = 1, weights = 1), as torch tensors on
-    the Learner's device. `_flat_batch_hook` lets ASOR rewrite it (rllib_asor/rllib/fast_sac.py).
-    """
-
-    def _make_batch_if_necessary(self, training_data: Any) -> Any:
-        episodes = training_data.episodes
-        if not episodes or not all(isinstance(e, FlatTransitions) for e in episodes):
-            return super()._make_batch_if_necessary(training_data)  # type: ignore[misc]
-        policies = [m for m in self.module.keys() if not is_aux_module(m)]  # type: ignore[attr-defined]
-        if len(policies) != 1:
-            raise ValueError(f"FlatReplayBuffer batches are single-agent; modules: {policies}")
-        cols = episodes[0].columns
-        if len(episodes) > 1:
-            cols = {k: np.concatenate([e.columns[k] for e in episodes]) for k in cols}
-        device = self._device  # type: ignore[attr-defined]
-        n = len(cols[Columns.REWARDS])
-        pb = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device) for k, v in cols.items()}
-        pb["n_step"] = torch.ones(n, dtype=torch.int64, device=device)
-        pb["weights"] = torch.ones(n, dtype=torch.float32, device=device)
-        batch = self._flat_batch_hook({policies[0]: pb})
-        return MultiAgentBatch({mid: SampleBatch(b) for mid, b in batch.items()}, env_steps=n)
-
-    def _flat_batch_hook(self, batch: dict[str, Any]) -> dict[str, Any]:
-        return batch
-
-    def _create_iterator_if_necessary(self, *, training_data: Any, **kwargs: Any) -> Any:
-        """Flat batches of several gradient steps: minibatches of the user's batch size."""
-        episodes = training_data.episodes
-        minibatch = (self.config.learner_config_dict or {}).get(MINIBATCH_KEY)  # type: ignore[attr-defined]
-        self._fast_steps = bool(
-            minibatch and episodes and all(isinstance(e, FlatTransitions) for e in episodes)
-        )
-        if self._fast_steps and not kwargs.get("minibatch_size"):
-            kwargs["minibatch_size"] = int(minibatch)
-            kwargs["num_epochs"] = 1
-        return super()._create_iterator_if_necessary(training_data=training_data, **kwargs)  # type: ignore[misc]
-
-    def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
-        out = super()._update(batch, **kwargs)  # type: ignore[misc]
-        if getattr(self, "_fast_steps", False):
-            self._polyak_targets()  # SAC's target update after every gradient step
-        return out
-
-    def after_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
-        if getattr(self, "_fast_steps", False):
-            # Targets were updated after each minibatch; keep DQNLearner from doing it again.
-            for mid in self.module.keys():  # type: ignore[attr-defined]
-                self.last_update_ts_by_mid[mid] = float("inf")  # type: ignore[attr-defined]
-            try:
-                super().after_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
-            finally:
-                for mid in list(self.last_update_ts_by_mid):  # type: ignore[attr-defined]
-                    self.last_update_ts_by_mid[mid] = 0  # type: ignore[attr-defined]
-            return
-        super().after_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
-
-    @torch.no_grad()
-    def _polyak_targets(self) -> None:
-        for mid, module in self.module._rl_modules.items():  # type: ignore[attr-defined]
-            inner = module.unwrapped()
-            if not isinstance(inner, TargetNetworkAPI):
-                continue
-            tau = self.config.get_config_for_module(mid).tau  # type: ignore[attr-defined]
-            main, target = [], []
-            for main_net, target_net in inner.get_target_network_pairs():
-                main.extend(main_net.parameters())
-                target.extend(target_net.parameters())
-            torch._foreach_lerp_(target, main, tau)
-
-
-class FastSACTorchLearner(FastSACLearnerMixin, SACTorchLearner):
-    """RLlib's SAC Learner that also reads `FlatReplayBuffer` batches (`fast_off_policy`)."""
-
-
 class AsorSACTorchLearner(FastSACLearnerMixin, _SoftQAsorMixin, SACTorchLearner):
     """SAC's torch Learner with ASOR; with `n_step > 1` the bonus is added to the n-step sum
     once (for s_t), an approximation of Σ γ^k λ·b(s_{t+k}). On the fast path (FlatReplayBuffer)
     the ASOR piece runs on the batch built from the buffer's columns."""
+
+    def flat_batch_module_ids(self) -> list[str]:
+        return [m for m in self.module.keys() if not is_aux_module(m)]
 
     def _flat_batch_hook(self, batch: dict[str, Any]) -> dict[str, Any]:
         self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)

@@ -13,7 +13,7 @@ from typing import Any
 from ray.rllib.algorithms.algorithm import Algorithm
 from ray.tune.registry import get_trainable_cls
 
-from rllib_asor.rllib.overlap import OverlappedPPO
+from rllib_asor.algorithms.ppo.overlap import OverlappedPPO
 from rllib_asor.rllib.wiring import SUPPORTED, with_asor
 
 ASOR_KEY = "asor"

@@ -7,7 +7,7 @@ What it wires in:
 - the validated settings in `learner_config_dict["asor"]` (pickled into every Learner and
   checkpoint),
 - a callback that lifts the Learner's ASOR statistics to `asor/...` in the results,
-- for SAC and CQL the fast off-policy path (`fast_off_policy`, rllib_asor/rllib/fast_sac.py:
+- for SAC and CQL the fast off-policy path (`fast_off_policy`, rllib_asor/algorithms/sac/fast.py:
   concat-MLP critics, flat replay buffer, batch built without the connector walk), unless
   `learner_config_dict["fast_off_policy"]` is False.
 """
@@ -22,10 +22,11 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
+from rllib_asor.algorithms.common.callbacks import add_callbacks
+from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
 from rllib_asor.asor.config import ALGORITHMS, AsorConfig
-from rllib_asor.rllib.callbacks import AsorMetricsCallback, add_callbacks
-from rllib_asor.rllib.env_registration import register_with_tune
-from rllib_asor.rllib.fast_sac import FAST_KEY, fast_off_policy
+from rllib_asor.registry.envs import register_with_tune
+from rllib_asor.rllib.callbacks import AsorMetricsCallback
 from rllib_asor.rllib.learners import (
     AsorCQLTorchLearner,
     AsorPPOTorchLearner,
@@ -36,7 +37,11 @@ from rllib_asor.rllib.learners import (
 )
 from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 
-SUPPORTED = {"PPO": AsorPPOTorchLearner, "SAC": AsorSACTorchLearner, "CQL": AsorCQLTorchLearner}
+SUPPORTED = {
+    "PPO": AsorPPOTorchLearner,
+    "SAC": AsorSACTorchLearner,
+    "CQL": AsorCQLTorchLearner,
+}
 assert tuple(sorted(SUPPORTED)) == ALGORITHMS, "one list of supported algorithms (asor.config)"
 
 
@@ -106,7 +111,7 @@ def _algorithm_name(config: AlgorithmConfig) -> str:
 
 
 def _wants_fast_path(config: AlgorithmConfig, asor: AsorConfig) -> bool:
-    """SAC/CQL get the fast off-policy path (rllib_asor/rllib/fast_sac.py) unless the config
+    """SAC/CQL get the fast off-policy path (rllib_asor/algorithms/sac/fast.py) unless the config
     opts out (`learner_config_dict["fast_off_policy"] = False`) or the proxy needs per-step
     infos, which the flat replay buffer does not keep (`rnd_per_dynamics`)."""
     if (config.learner_config_dict or {}).get(FAST_KEY) is False:

@@ -14,7 +14,7 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
 import rllib_asor
-from rllib_asor.rllib.fast_sac import (
+from rllib_asor.algorithms.sac.fast import (
     FAST_KEY,
     FRAGMENT,
     STEPS_PER_CALL,
@@ -22,7 +22,7 @@ from rllib_asor.rllib.fast_sac import (
     FastSACTorchRLModule,
     fast_off_policy,
 )
-from rllib_asor.rllib.replay import MINIBATCH_KEY, FlatReplayBuffer, FlatTransitions
+from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY, FlatReplayBuffer, FlatTransitions
 
 
 def _episode(start: int, n: int, terminated: bool, obs_dim: int = 3) -> SingleAgentEpisode:

@@ -15,9 +15,9 @@ from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 import rllib_asor
 import rllib_asor.envs  # noqa: F401  (registers rllib_asor/LavaWorld-v0)
+from rllib_asor.algorithms.common.learner_speed import IndexSelectShuffleBatch, fuse_adam
+from rllib_asor.algorithms.ppo.lean import DropMaskedRows, LeanPPOTorchLearner, drop_bootstrap_rows
 from rllib_asor.rllib.connector import SHARED_VALUES, AsorRewardConnector, SharedValuesGAE
-from rllib_asor.rllib.lean_ppo import DropMaskedRows, LeanPPOTorchLearner, drop_bootstrap_rows
-from rllib_asor.rllib.learner_speed import IndexSelectShuffleBatch, fuse_adam
 from tests.rllib.test_ppo_asor import lava_ppo_config
 
 DISC = "asor_disc.default_policy"

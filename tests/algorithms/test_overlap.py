@@ -8,7 +8,7 @@ from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.algorithms.sac import SACConfig
 
 import rllib_asor
-from rllib_asor.rllib.overlap import OverlappedPPO, overlap_sampling
+from rllib_asor.algorithms.ppo.overlap import OverlappedPPO, overlap_sampling
 
 TAG = "overlap_sample"
 

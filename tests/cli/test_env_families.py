@@ -1,4 +1,4 @@
-"""Env knowledge comes from the family registry (rllib_asor.rllib.env_families), not the CLI."""
+"""Env knowledge comes from the family registry (rllib_asor.registry.families), not the CLI."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 from rllib_asor.cli import experiment
 from rllib_asor.cli.errors import UsageError
-from rllib_asor.rllib.env_families import RACE, family_of
+from rllib_asor.registry.families import RACE, family_of
 
 
 def test_family_lookup_by_env_id():
@@ -20,8 +20,8 @@ def test_family_lookup_by_env_id():
 def test_race_from_flags_gets_the_family_defaults():
     """`rllib train --run PPO --env game_env/ObstacleRace-v0 --test`: the race network, the race
     metrics and a short episode limit, with nothing in the config."""
-    from rllib_asor.models.race_net import RaceNetModule
-    from rllib_asor.rllib.race import RaceMetricsCallback
+    from rllib_asor.race.config import RaceMetricsCallback
+    from rllib_asor.race.net import RaceNetModule
 
     exp = experiment.from_flags("PPO", "game_env/ObstacleRace-v0", None, None)
     experiment.apply_overrides(exp, test=True)
@@ -45,7 +45,7 @@ def test_curriculum_outside_a_family_that_has_one_names_the_allowed_envs(tmp_pat
 @pytest.mark.parametrize("given, expected", [("", False), ("normalize_actions: true, ", True)])
 def test_race_actions_are_not_unsquashed_unless_the_file_asks(tmp_path: Path, given, expected):
     """The race's actions are discrete: RLlib's unsquash/clip are no-ops there (and cost time)."""
-    from rllib_asor.rllib.race import race_ppo_config
+    from rllib_asor.race.config import race_ppo_config
 
     path = tmp_path / "x.yaml"
     path.write_text(
@@ -57,7 +57,7 @@ def test_race_actions_are_not_unsquashed_unless_the_file_asks(tmp_path: Path, gi
 
 
 def test_drop_bootstrap_rows_in_a_ppo_file_gets_the_lean_learner(tmp_path: Path):
-    from rllib_asor.rllib.lean_ppo import LeanPPOTorchLearner
+    from rllib_asor.algorithms.ppo.lean import LeanPPOTorchLearner
 
     path = tmp_path / "x.yaml"
     path.write_text(

@@ -12,8 +12,8 @@ import pytest
 
 from rllib_asor.cli import experiment, multi_agent
 from rllib_asor.cli.errors import UsageError
-from rllib_asor.rllib import env_registration as envs
-from rllib_asor.rllib.env_families import RACE
+from rllib_asor.registry import envs
+from rllib_asor.registry.families import RACE
 
 MULTI = """
 x:
@@ -53,7 +53,7 @@ def test_mapping_fn_may_be_a_function_path():
     kwargs = multi_agent.parse(
         {
             "policies": ["shared"],
-            "policy_mapping_fn": "rllib_asor.rllib.race:shared_policy_mapping",
+            "policy_mapping_fn": "rllib_asor.race.config:shared_policy_mapping",
             "policies_to_train": ["shared"],
         }
     )
@@ -94,7 +94,7 @@ def test_race_envs_are_known_to_the_cli_with_race_callbacks(write_yaml):
     [exp] = experiment.load_file(
         write_yaml("x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  config: {}\n")
     )
-    from rllib_asor.rllib.race import RaceMetricsCallback
+    from rllib_asor.race.config import RaceMetricsCallback
 
     assert experiment.validate(exp).callbacks_class is RaceMetricsCallback
 

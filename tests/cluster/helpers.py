@@ -9,7 +9,7 @@ from ray.rllib.algorithms.ppo import PPOConfig
 
 import rllib_asor
 import rllib_asor.envs  # noqa: F401  (registers rllib_asor/LavaWorld-v0)
-from rllib_asor.rllib.env_registration import register_with_tune
+from rllib_asor.registry.envs import register_with_tune
 
 LAVA = "rllib_asor/LavaWorld-v0"
 ASOR_KEYS = ("disc_loss", "disc_acc", "aug_reward_mean", "real_fraction", "rnd_loss")

@@ -29,7 +29,7 @@ import ray
 from ray import tune
 from ray.rllib.utils.numpy import convert_to_numpy
 
-from rllib_asor.rllib.faults import FaultCounter, make_faulty_env, with_fault_tolerance
+from rllib_asor.algorithms.common.faults import FaultCounter, make_faulty_env, with_fault_tolerance
 from tests.cluster.helpers import LAVA, assert_asor_metrics, lava_ppo_asor
 
 

@@ -18,7 +18,7 @@ import pytest
 import ray
 from ray.cluster_utils import Cluster
 
-from rllib_asor.rllib.faults import with_fault_tolerance
+from rllib_asor.algorithms.common.faults import with_fault_tolerance
 from tests.cluster.helpers import assert_asor_metrics, lava_ppo_asor
 
 REPO = Path(__file__).resolve().parents[2]

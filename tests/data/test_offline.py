@@ -14,12 +14,12 @@ import torch
 from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
 import rllib_asor
+from rllib_asor.algorithms.cql.offline import offline_input
 from rllib_asor.asor.reward import reward_bonus
 from rllib_asor.cli.main import main as rllib_main
 from rllib_asor.data.collect import collect
 from rllib_asor.data.format import FORMAT, load_dataset, read_manifest
 from rllib_asor.data.scoring import normalized_score
-from rllib_asor.rllib.offline import offline_input
 
 ENV = "rllib_asor/HopperShift-v0"
 STEPS = 200

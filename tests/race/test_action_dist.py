@@ -5,7 +5,7 @@ import pytest
 import torch
 from ray.rllib.core.distribution.torch.torch_distribution import TorchMultiCategorical
 
-from rllib_asor.models.multi_categorical import PaddedMultiCategorical
+from rllib_asor.race.action_dist import PaddedMultiCategorical
 
 NVEC = [3, 3, 2, 2, 2, 2, 8, 2]  # the race's action heads
 

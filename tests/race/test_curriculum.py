@@ -4,7 +4,7 @@ import gymnasium as gym
 import pytest
 
 import game_env
-from rllib_asor.rllib.curriculum import (
+from rllib_asor.race.curriculum import (
     MapCurriculum,
     map_curriculum_callback,
 )
@@ -88,7 +88,7 @@ def test_max_env_steps_moves_on_without_episodes():
 
 @pytest.mark.parametrize("num_racers", [1, 2], ids=["single", "multi"])
 def test_ppo_run_moves_the_envs_to_the_next_stage(ray_session, num_racers):
-    from rllib_asor.rllib.race import RaceMetricsCallback, race_ppo_config
+    from rllib_asor.race.config import RaceMetricsCallback, race_ppo_config
 
     cur = {"stages": [[2], 3], "metric": "goal_reward", "threshold": -1.0, "min_episodes": 1}
     envs = 2 if num_racers == 1 else 1

@@ -9,7 +9,7 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
 import game_env
 from rllib_asor.models import MODULES, get_module_class
-from rllib_asor.models.race_net import DEFAULTS, RaceNetModule
+from rllib_asor.race.net import DEFAULTS, RaceNetModule
 
 B = 8
 
@@ -137,9 +137,9 @@ def test_spec_build_ignores_rllib_default_model_keys(env):
 
 def test_registry_resolves_names_and_dotted_paths():
     assert get_module_class("race_net") is RaceNetModule
-    assert get_module_class("rllib_asor.models.race_net:RaceNetModule") is RaceNetModule
-    assert get_module_class("rllib_asor.models.race_net.RaceNetModule") is RaceNetModule
+    assert get_module_class("rllib_asor.race.net:RaceNetModule") is RaceNetModule
+    assert get_module_class("rllib_asor.race.net.RaceNetModule") is RaceNetModule
     assert set(MODULES) == {"race_net"}
-    for bad in ("race_nett", "rllib_asor.models.race_net:Nope", "no_such_pkg.mod:X", ""):
+    for bad in ("race_nett", "rllib_asor.race.net:Nope", "no_such_pkg.mod:X", ""):
         with pytest.raises(ValueError, match="race_net"):
             get_module_class(bad)

@@ -41,7 +41,7 @@ def test_race_example_gets_the_race_network_metrics_and_asor_inputs(path):
 
 
 def test_curriculum_example_adds_the_map_curriculum():
-    from rllib_asor.rllib.curriculum import MapCurriculumCallback
+    from rllib_asor.race.curriculum import MapCurriculumCallback
 
     [exp] = experiment.load_file(str(REPO / "tuned_examples/race/ppo-asor-curriculum.yaml"))
     cfg = experiment.validate(exp)

@@ -6,7 +6,7 @@ from ray.rllib.env.multi_agent_episode import MultiAgentEpisode
 from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 from ray.rllib.utils.metrics.metrics_logger import MetricsLogger
 
-from rllib_asor.rllib.race import RACE_METRICS, RaceMetricsCallback
+from rllib_asor.race.config import RACE_METRICS, RaceMetricsCallback
 
 
 def metrics(success: float) -> dict:

@@ -7,8 +7,7 @@ import pytest
 import torch
 
 import rllib_asor
-from rllib_asor.rllib.callbacks import AsorMetricsCallback
-from rllib_asor.rllib.race import (
+from rllib_asor.race.config import (
     MULTI_ENV,
     RACE_ASOR_OBS_KEYS,
     RACE_METRICS,
@@ -18,6 +17,7 @@ from rllib_asor.rllib.race import (
     make_single_race_env,
     race_ppo_config,
 )
+from rllib_asor.rllib.callbacks import AsorMetricsCallback
 
 ASOR_KEYS = ("disc_loss", "disc_acc", "aug_reward_mean", "real_fraction", "rnd_loss", "lambda")
 

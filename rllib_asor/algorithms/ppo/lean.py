@@ -27,8 +27,8 @@ from ray.rllib.connectors.connector_v2 import ConnectorV2
 from ray.rllib.connectors.learner import GeneralAdvantageEstimation
 from ray.rllib.core.columns import Columns
 
-from rllib_asor.rllib.learner_speed import SameMathSpeedMixin, take_rows
-from rllib_asor.rllib.pipeline import insert_beside
+from rllib_asor.algorithms.common.learner_speed import SameMathSpeedMixin, take_rows
+from rllib_asor.algorithms.common.pipeline import insert_beside
 
 DROP_KEY = "drop_bootstrap_rows"
 """`learner_config_dict` key that switches the row drop on."""
@@ -53,7 +53,7 @@ def drop_bootstrap_rows(config: AlgorithmConfig, enabled: bool = True) -> Algori
     elif not issubclass(config._learner_class, LeanPPOMixin):
         raise ValueError(
             f"drop_bootstrap_rows: the Learner class {config._learner_class.__name__} would "
-            "ignore it; mix rllib_asor.rllib.lean_ppo.LeanPPOMixin into it (before PPO's Learner) "
+            "ignore it; mix rllib_asor.algorithms.ppo.lean.LeanPPOMixin into it (before PPO's Learner) "
             "or leave learner_class unset"
         )
     config.learners(learner_config_dict={**(config.learner_config_dict or {}), DROP_KEY: enabled})

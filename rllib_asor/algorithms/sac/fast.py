@@ -11,7 +11,7 @@ docs/results.md, "Fast experiments: SAC speed"), a stock RLlib 2.60 SAC gradient
    per step (twin, target, policy term). `FastSACCatalog` builds that concat MLP
    (`fcnet_hiddens` sets its layers; the policy network is unchanged).
 2. **Replay.** `EpisodeReplayBuffer` slices a one-step episode per sampled transition;
-   `rllib_asor.rllib.replay.FlatReplayBuffer` samples rows of flat arrays instead
+   `rllib_asor.algorithms.sac.replay.FlatReplayBuffer` samples rows of flat arrays instead
    (`replay_buffer_config: {type: EpisodeReplayBuffer, storage: flat}` + `FlatReplayCallback`,
    because RLlib's SAC validation accepts only its own buffer type names).
 3. **The learner connector** walks those 256 episodes to build the batch; our Learners
@@ -53,7 +53,7 @@ from ray.rllib.core.models.torch.encoder import TorchMLPEncoder
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-from rllib_asor.rllib.replay import MINIBATCH_KEY
+from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
 
 logger = logging.getLogger(__name__)
 
@@ -84,7 +84,7 @@ def install_flat_buffer(algorithm: Any) -> bool:
     """Install `FlatReplayBuffer` on `algorithm` if its config asks for it; True if done."""
     from ray.rllib.utils.replay_buffers.episode_replay_buffer import EpisodeReplayBuffer
 
-    from rllib_asor.rllib.replay import FlatReplayBuffer
+    from rllib_asor.algorithms.sac.replay import FlatReplayBuffer
 
     rb = algorithm.config.replay_buffer_config or {}
     current = getattr(algorithm, "local_replay_buffer", None)
@@ -199,7 +199,7 @@ def fast_off_policy(config: Any, enabled: bool = True) -> Any:
 
 
 def _fast_replay(config: Any) -> None:
-    from rllib_asor.rllib.learners import FastSACTorchLearner
+    from rllib_asor.algorithms.sac.learner import FastSACTorchLearner
 
     rb = dict(config.replay_buffer_config or {})
     n_step = config.n_step
@@ -215,7 +215,7 @@ def _fast_replay(config: Any) -> None:
     if config.seed is not None:
         rb.setdefault("seed", config.seed)
     config.training(replay_buffer_config=rb)
-    from rllib_asor.rllib.callbacks import add_callbacks
+    from rllib_asor.algorithms.common.callbacks import add_callbacks
 
     add_callbacks(config, FlatReplayCallback)
     if config._learner_class is None:

@@ -12,7 +12,7 @@ samples uniformly with replacement (SB3's and CleanRL's buffer). `sample()` retu
 (`rllib_asor.rllib.learners.FastSACLearnerMixin`) turn into the train batch directly. It is
 for single-agent SAC with n_step 1. RLlib's SAC config validation accepts only its own buffer
 type names and RLlib's learner cannot read `FlatTransitions`, so use it through
-`fast_off_policy(config)` (rllib_asor/rllib/fast_sac.py), which installs it at algorithm init
+`fast_off_policy(config)` (rllib_asor/algorithms/sac/fast.py), which installs it at algorithm init
 and sets a Learner that reads it.
 
 Checkpoints: RLlib 2.60's new-stack `Algorithm.save_to_path` stores no replay buffer (its own

@@ -24,7 +24,7 @@ p.add_argument("--profile", default="")
 a = p.parse_args()
 torch.set_num_threads(1)
 ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-import rllib_asor.rllib.race as race
+import rllib_asor.race.config as race
 from benchmarks.race_learning import race_config
 
 base_config = race.race_ppo_config

@@ -13,7 +13,7 @@ import time
 
 sys.argv = [sys.argv[0]]
 import benchmarks.race_speed as rs
-from rllib_asor.rllib import overlap
+from rllib_asor.algorithms.ppo import overlap
 
 T = {"collect": 0.0, "update": 0.0, "n": 0}
 orig_collect = overlap.OverlappedPPO._collect

@@ -7,8 +7,8 @@ import torch
 from ray.rllib.connectors.learner import GeneralAdvantageEstimation
 from ray.rllib.core.learner.learner import Learner
 
-from rllib_asor.rllib.lean_ppo import DropMaskedRows
-from rllib_asor.rllib.pipeline import insert_beside
+from rllib_asor.algorithms.common.pipeline import insert_beside
+from rllib_asor.algorithms.ppo.lean import DropMaskedRows
 
 _piece = None
 

@@ -1,0 +1,1 @@
+"""Pieces every algorithm here shares: Learner speed-ups, pipeline placement, callbacks, faults."""

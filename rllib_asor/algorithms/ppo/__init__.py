@@ -1,0 +1,1 @@
+"""PPO: lean Learner (bootstrap rows dropped) and overlapped sampling."""

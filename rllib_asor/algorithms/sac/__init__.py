@@ -1,0 +1,1 @@
+"""SAC: the fast off-policy path (module, flat replay buffer, Learner); CQL reuses it."""

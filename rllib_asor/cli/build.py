@@ -1,0 +1,249 @@
+"""Build: an `Experiment` (one grid point) into an RLlib AlgorithmConfig, and the Tune param space."""
+
+from __future__ import annotations
+
+import difflib
+from typing import Any
+
+from rllib_asor.cli import grid, multi_agent
+from rllib_asor.cli.errors import UsageError, one_line, quiet
+from rllib_asor.cli.spec import Experiment
+from rllib_asor.registry.families import families_with_curriculum, family_of
+
+# Config keys that are not plain AlgorithmConfig attributes but that we apply ourselves.
+SPECIAL_CONFIG_KEYS = (
+    "model_config",
+    "env_config",
+    "env_to_module_connector",
+    "rl_module",
+    "multi_agent",
+    "curriculum",
+)
+
+
+# Config key (as written) -> key in AlgorithmConfig.to_dict() (the Tune param space).
+PARAM_SPACE_KEYS = {
+    "model_config": "_model_config",
+    "train_batch_size_per_learner": "_train_batch_size_per_learner",
+    "env_to_module_connector": "_env_to_module_connector",
+    "rl_module": "_rl_module_spec",
+    "lambda_": "lambda",
+    "input_": "input",
+    "framework_str": "framework",
+    "callbacks_class": "callbacks",
+    "create_env_on_local_worker": "create_env_on_driver",
+    "custom_evaluation_function": "custom_eval_function",
+}
+
+
+PPO_ONLY_LEARNER_KEYS = ("overlap_sampling", "drop_bootstrap_rows")
+"""`learner_config_dict` switches of ours that only PPO reads (docs/speed.md)."""
+
+
+def algorithm_class(exp: Experiment) -> type:
+    """The RLlib Algorithm class for `exp.run` (UsageError if unknown)."""
+    from ray.rllib.algorithms.registry import ALGORITHMS
+    from ray.tune.registry import get_trainable_cls
+
+    learner_dict = exp.config.get("learner_config_dict")
+    learner_dict = learner_dict if isinstance(learner_dict, dict) else {}
+    for key in PPO_ONLY_LEARNER_KEYS:
+        if learner_dict.get(key) and exp.run != "PPO":
+            raise UsageError(
+                f"works with run: PPO only, not {exp.run}",
+                source=exp.source,
+                key=f"{exp.name}.config.learner_config_dict.{key}",
+            )
+    if learner_dict.get("overlap_sampling"):
+        from rllib_asor.algorithms.ppo.overlap import OverlappedPPO
+
+        return OverlappedPPO  # PPO whose env runners sample during the update
+    try:
+        with quiet():
+            return get_trainable_cls(exp.run)
+    except Exception:
+        allowed = ", ".join(sorted(ALGORITHMS))
+        raise UsageError(
+            f"unknown algorithm {exp.run!r}; allowed: {allowed}",
+            source=exp.source,
+            key=f"{exp.name}.run",
+        ) from None
+
+
+def attr_name(key: str) -> str:
+    from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
+
+    return AlgorithmConfig._translate_special_keys(key, warn_deprecated=False)
+
+
+def check_key(default_cfg: Any, key: str, exp: Experiment) -> None:
+    from ray._common.deprecation import DEPRECATED_VALUE
+
+    if key in SPECIAL_CONFIG_KEYS:
+        return
+    attr = attr_name(key)
+    cls_attr = getattr(type(default_cfg), attr, None)
+    known = attr in vars(default_cfg) or (
+        isinstance(cls_attr, property) and cls_attr.fset is not None
+    )
+    where = f"{exp.name}.config.{key}"
+    algo = type(default_cfg).__name__
+    if not known:
+        names = sorted(k for k in vars(default_cfg) if not k.startswith("_")) + list(
+            SPECIAL_CONFIG_KEYS
+        )
+        close = difflib.get_close_matches(key, names, n=3)
+        hint = f"did you mean {' or '.join(close)}? " if close else ""
+        raise UsageError(
+            f"unknown key for {exp.run}; {hint}allowed: the settings of {algo} "
+            f"(e.g. lr, gamma, train_batch_size, num_env_runners, model_config) and 'asor'",
+            source=exp.source,
+            key=where,
+        )
+    if getattr(default_cfg, attr, None) == DEPRECATED_VALUE:
+        raise UsageError(
+            f"is deprecated and has no effect on RLlib's new API stack ({algo})",
+            source=exp.source,
+            key=where,
+        )
+
+
+def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = None) -> Any:
+    """AlgorithmConfig for one grid point (default: first candidate of every grid)."""
+    cls = algorithm_class(exp)
+    with quiet():
+        cfg = cls.get_default_config()
+        for key in exp.config:
+            check_key(cfg, key, exp)
+        values = grid.with_candidates(exp.config, choice)
+        family = family_of(exp.env)
+        if family is not None:
+            values = {**family.config_defaults, **values}
+        model_config = values.pop("model_config", None)
+        env_config = values.pop("env_config", None) or {}
+        connector = values.pop("env_to_module_connector", None)
+        rl_module = values.pop("rl_module", None)
+        multi = values.pop("multi_agent", None)
+        curriculum = _curriculum(values.pop("curriculum", None), exp)
+        if multi is not None:
+            try:
+                cfg.multi_agent(**multi_agent.parse(multi))
+            except ValueError as e:
+                raise UsageError(
+                    one_line(e), source=exp.source, key=f"{exp.name}.config.multi_agent"
+                ) from None
+        if rl_module is None and family is not None and family.default_module is not None:
+            rl_module = {"module_class": family.default_module}
+        if rl_module is not None:
+            cfg.rl_module(rl_module_spec=_module_spec(rl_module, exp))
+        cfg.environment(env=exp.env, env_config=env_config)
+        if model_config is not None:
+            cfg.rl_module(model_config=model_config)
+        if connector is not None:
+            cfg.env_runners(env_to_module_connector=connector)
+        try:
+            cfg.update_from_dict(values)
+        except Exception as e:  # a value RLlib's setters reject
+            raise UsageError(
+                f"invalid value: {one_line(e)}", source=exp.source, key=f"{exp.name}.config"
+            ) from None
+        if (
+            family is not None
+            and family.metrics_callbacks is not None
+            and not {"callbacks", "callbacks_class"} & set(exp.config)
+        ):  # the family's metrics (race/...) unless the file names its own callbacks
+            cfg.callbacks(family.metrics_callbacks())
+        if curriculum is not None:
+            from rllib_asor.algorithms.common.callbacks import add_callbacks
+
+            add_callbacks(cfg, curriculum)
+        if exp.asor is None and exp.run == "PPO":  # with_asor's PPO Learner reads the key too
+            from rllib_asor.algorithms.ppo.lean import drop_bootstrap_rows, drop_enabled
+
+            if drop_enabled(cfg):
+                cfg = drop_bootstrap_rows(cfg)
+        if exp.asor is None and exp.run in ("SAC", "CQL"):  # with_asor does it for ASOR runs
+            from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
+
+            # The fast off-policy path (docs/results.md, issue 11) unless the file opts out
+            # with `learner_config_dict: {fast_off_policy: false}`.
+            if (cfg.learner_config_dict or {}).get(FAST_KEY) is not False:
+                cfg = fast_off_policy(cfg)
+    return cfg
+
+
+def _curriculum(block: Any, exp: Experiment) -> Any:
+    """The callback class for a ``curriculum:`` block (envs whose family has one), or None."""
+    if block is None:
+        return None
+    key = f"{exp.name}.config.curriculum"
+    family = family_of(exp.env)
+    if family is None or family.curriculum is None:
+        allowed = ", ".join(families_with_curriculum())
+        raise UsageError(
+            f"a curriculum needs an env that supports one; allowed envs: {allowed} "
+            f"(got {exp.env!r})",
+            source=exp.source,
+            key=key,
+        )
+    try:
+        return family.curriculum(block)
+    except (TypeError, ValueError) as e:
+        raise UsageError(one_line(e), source=exp.source, key=key) from None
+
+
+def _module_spec(block: dict[str, Any], exp: Experiment) -> Any:
+    """RLModuleSpec for `rl_module: {module_class: ...}`; model_config comes from the config."""
+    from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+
+    from rllib_asor.models import get_module_class
+
+    try:
+        return RLModuleSpec(module_class=get_module_class(block["module_class"]))
+    except ValueError as e:
+        raise UsageError(
+            one_line(e), source=exp.source, key=f"{exp.name}.config.rl_module.module_class"
+        ) from None
+
+
+def param_space(exp: Experiment, algo_config: Any | None = None) -> dict[str, Any]:
+    """Tune param space: `algo_config.to_dict()` with grids as `tune.grid_search` and `asor`."""
+    from ray import tune
+
+    cfg = algo_config if algo_config is not None else build_algo_config(exp)
+    space = cfg.to_dict()
+    for path, candidates in grid.find_grids(exp.config):
+        attr = attr_name(path[0])
+        top = PARAM_SPACE_KEYS.get(attr, attr)
+        grid.set_path(space, (top, *path[1:]), tune.grid_search(list(candidates)))
+    if exp.asor is not None:
+        space["asor"] = grid.to_tune(exp.asor)
+    return space
+
+
+def required_cpus(algo_config: Any) -> float:
+    """Logical CPUs one trial needs: main process + env runners + learners, plus the Ray
+    Data tasks and actors of an offline run (`offline_data_cpus`)."""
+    cls = algo_config.algo_class
+    try:
+        pgf = cls.default_resource_request(algo_config)
+        trial = float(pgf.required_resources.get("CPU", 1))
+    except Exception:
+        c = algo_config
+        trial = 1.0 + c.num_env_runners * c.num_cpus_per_env_runner + max(c.num_learners, 0)
+    return trial + offline_data_cpus(algo_config)
+
+
+def offline_data_cpus(algo_config: Any) -> float:
+    """CPUs an offline run's Ray Data pipeline takes outside the trial's own reservation:
+    a read task (1) and RLlib's `OfflinePreLearner` actors (`map_batches_kwargs` concurrency,
+    default max(2, num_learners), 1 CPU each unless `num_cpus` says otherwise). Without them
+    free, reading waits forever (measured on 2 CPUs: "3/2 CPU requested", no progress)."""
+    source = getattr(algo_config, "input_", "sampler")
+    if not source or source == "sampler":
+        return 0.0
+    kwargs = dict(getattr(algo_config, "map_batches_kwargs", None) or {})
+    concurrency = kwargs.get("concurrency", max(2, algo_config.num_learners))
+    if isinstance(concurrency, tuple | list):  # (min, max) actor pool
+        concurrency = concurrency[-1]
+    return 1.0 + float(concurrency) * float(kwargs.get("num_cpus", 1.0))

@@ -1,0 +1,119 @@
+"""Validate: everything about an `Experiment` that can be checked before Ray starts."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rllib_asor.cli import grid
+from rllib_asor.cli.build import algorithm_class, build_algo_config
+from rllib_asor.cli.errors import UsageError, one_line, quiet
+from rllib_asor.cli.offline_inputs import check_offline_input
+from rllib_asor.cli.overrides import checkpoint_kwargs
+from rllib_asor.cli.spec import Experiment
+
+
+def _check_grids(exp: Experiment) -> None:
+    if any(True for _ in grid.find_grids(exp.config.get("multi_agent") or {})):
+        raise UsageError(
+            "grid_search is not allowed here: allowed fixed policies and policy_mapping_fn",
+            source=exp.source,
+            key=f"{exp.name}.config.multi_agent",
+        )
+    for tree, prefix in ((exp.config, "config"), (exp.asor or {}, "config.asor")):
+        for path, candidates in grid.find_grids(tree):
+            if not isinstance(candidates, list) or not candidates:
+                raise UsageError(
+                    f"{candidates!r} is invalid: allowed a non-empty list of values",
+                    source=exp.source,
+                    key=f"{exp.name}.{prefix}.{'.'.join(path)}.grid_search",
+                )
+
+
+def _check_checkpoint_config(exp: Experiment) -> None:
+    from ray import tune
+
+    try:
+        with quiet():
+            tune.CheckpointConfig(**checkpoint_kwargs(exp))
+    except (ValueError, TypeError) as e:
+        raise UsageError(
+            one_line(e), source=exp.source, key=f"{exp.name}.checkpoint_config"
+        ) from None
+
+
+def validate_asor(exp: Experiment) -> None:
+    """Validate the asor block with AsorConfig for every grid candidate."""
+    if exp.asor is None:
+        return
+    from rllib_asor.asor.config import ALGORITHMS, AsorConfig
+
+    if exp.run not in ALGORITHMS:
+        raise UsageError(
+            f"ASOR does not support {exp.run!r}; allowed: {', '.join(ALGORITHMS)}",
+            source=exp.source,
+            key=f"{exp.name}.run",
+        )
+    points: list[dict[grid.Path, Any]] = [{}]
+    for path, candidates in grid.find_grids(exp.asor):
+        points += [{path: c} for c in candidates]
+    for choice in points:
+        try:
+            AsorConfig.from_dict(grid.with_candidates(exp.asor, choice))
+        except (ValueError, TypeError) as e:
+            raise UsageError(
+                one_line(e), source=exp.source, key=f"{exp.name}.config.asor"
+            ) from None
+
+
+def validate_env(exp: Experiment) -> None:
+    """The env id must be registered, and the env must build with each `env_config` candidate."""
+    import gymnasium as gym
+
+    from rllib_asor.registry import envs
+
+    with quiet():
+        if not envs.env_exists(exp.env):
+            raise UsageError(
+                f"unknown env id {exp.env!r}; allowed: {envs.known_ids()}",
+                source=exp.source,
+                key=f"{exp.name}.env",
+            )
+        if exp.env not in gym.registry and exp.env not in envs.race_creators():
+            return  # registered with Tune by someone else: built only on the env runners
+        tree = exp.config.get("env_config") or {}
+        points: list[dict[grid.Path, Any]] = [{}]
+        for path, candidates in grid.find_grids(tree):
+            points += [{path: c} for c in candidates[1:]]
+        for choice in points:
+            env_config = grid.with_candidates(tree, choice)
+            try:
+                envs.make_env(exp.env, env_config).close()
+            except Exception as e:
+                raise UsageError(
+                    f"{exp.env} cannot be built with {env_config!r}: {one_line(e)}",
+                    source=exp.source,
+                    key=f"{exp.name}.config.env_config",
+                ) from None
+
+
+def validate(exp: Experiment) -> Any:
+    """Check everything that can be checked before Ray starts; return the first-point config."""
+    check_offline_input(exp)
+    _check_grids(exp)
+    _check_checkpoint_config(exp)
+    algorithm_class(exp)
+    validate_asor(exp)
+    validate_env(exp)
+    cfg = None
+    points: list[dict[grid.Path, Any]] = [{}]
+    for path, candidates in grid.find_grids(exp.config):
+        points += [{path: c} for c in candidates[1:]]
+    for choice in points:
+        candidate = build_algo_config(exp, choice)
+        with quiet():
+            try:
+                candidate.validate()
+            except Exception as e:
+                raise UsageError(one_line(e), source=exp.source, key=f"{exp.name}.config") from None
+        cfg = cfg or candidate
+    return cfg
