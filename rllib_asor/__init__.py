@@ -15,9 +15,10 @@ from rllib_asor.envs.registration import register_envs
 register_envs()
 
 if TYPE_CHECKING:
+    from rllib_asor.algorithms.maple.maple import MapleConfig, MopoConfig
     from rllib_asor.asor.config import AsorConfig
 
-__all__ = ["AsorConfig", "with_asor"]
+__all__ = ["AsorConfig", "MapleConfig", "MopoConfig", "with_asor"]
 __version__ = "0.1.0"
 
 
@@ -47,4 +48,8 @@ def __getattr__(name: str) -> Any:
         from rllib_asor.asor.config import AsorConfig
 
         return AsorConfig
+    if name in ("MapleConfig", "MopoConfig"):  # MAPLE / MOPO (issue 24), imported on first use
+        from rllib_asor.algorithms.maple import maple
+
+        return getattr(maple, name)
     raise AttributeError(f"module 'rllib_asor' has no attribute {name!r}")

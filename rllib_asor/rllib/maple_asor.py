@@ -19,11 +19,16 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from ray.rllib.core.columns import Columns
 
+from rllib_asor.algorithms.maple.learner import BONUS, MapleTorchLearner
+from rllib_asor.algorithms.maple.losses import state_values
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.proxy import ProxyInputs, VisitationProxy
 from rllib_asor.asor.reward import potential_shaping, reward_bonus, standardize
 from rllib_asor.asor.update import AsorBatch, AsorResult, AsorState, asor_update
+from rllib_asor.rllib.learners import AsorLearnerMixin
+from rllib_asor.rllib.modules import LABEL, proxy_batch
 
 
 def maple_asor_bonus(
@@ -93,3 +98,65 @@ def real_batch(
         next_features=next_features,
         terminateds=terminateds,
     )
+
+
+class AsorMapleTorchLearner(AsorLearnerMixin, MapleTorchLearner):
+    """MAPLE's Learner with ASOR: before each SAC step, the batch's real transitions
+    (`real_*` columns, written by `MAPLE.training_step`) are ranked by V(s) = min Q(s, π(s))
+    with their GRU contexts and by the visitation proxy; the discriminator and the proxy
+    train on them in the same update; every segment step (real and model) gets λ·b(s) in
+    the `asor_bonus` column, which MAPLE's loss adds to the rewards. Offline: λ's timestep
+    is the number of real rows ranked so far (not checkpointed)."""
+
+    asor_in_pipeline = False
+
+    def build(self) -> None:
+        super().build()
+        self._asor_offline_rows = 0
+        self._maple_asor_rng = np.random.default_rng(self.asor.seed)
+
+    def _update(self, batch: dict, **kwargs: object) -> object:
+        for pid, ids in self._asor_piece.aux_ids.items():
+            if pid not in batch:
+                continue
+            pb = batch[pid]
+            nets = self.module[pid].unwrapped().nets
+            values = state_values(
+                nets,
+                pb["real_obs"],
+                pb["real_last_actions"],
+                pb["real_policy_hidden"],
+                pb["real_value_hidden"],
+            )
+            real = real_batch(
+                pb["real_obs"],
+                pb["real_next_obs"],
+                pb["real_rewards"].float(),
+                pb["real_terminateds"].bool(),
+                values,
+                gamma=float(self.config.gamma),
+                timestep=float(self._asor_offline_rows),
+                actions=pb["real_actions"],
+                dynamics_ids=pb["real_dynamics_ids"].long(),
+            )
+            state = self.module[ids.disc].unwrapped().state
+            proxy = self.module[ids.proxy].unwrapped().proxy if ids.proxy is not None else None
+            delta, result = maple_asor_bonus(
+                self.asor,
+                state,
+                proxy,
+                real,
+                pb["obs"],
+                pb["next_obs"],
+                pb["terminateds"].bool(),
+                pb["valid"].bool(),
+                self._maple_asor_rng,
+            )
+            pb[BONUS] = delta
+            batch[ids.disc] = {Columns.OBS: result.disc_features, LABEL: result.disc_labels}
+            if ids.proxy is not None:
+                batch[ids.proxy] = proxy_batch(real.proxy_inputs)
+            if result.metrics:
+                self.metrics.log_dict(result.metrics, key=ids.disc, window=1)
+            self._asor_offline_rows += int(real.features.shape[0])
+        return super()._update(batch, **kwargs)

@@ -1,0 +1,167 @@
+"""`MapleSettings`: MAPLE's (and MOPO's) own hyperparameters, typed and validated.
+
+Defaults follow the PyTorch code MAPLE+SRPO runs on (`AIDefender/SRPO
+offlinerl/config/algo/maple_config_st.py`) where the issue (24) does not fix them, and MOPO's
+ensemble (`polixir/OfflineRL offlinerl/config/algo/mopo_config.py`: 7 members, 5 elites;
+`xionghuichen/MAPLE examples/config/d4rl/base_maple.py`: 4×200 swish). The same names are the
+YAML `maple:` block. A bad value raises ValueError naming the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass
+class MapleSettings:
+    """MAPLE's settings (the YAML `maple:` block)."""
+
+    context: bool = True
+    """True: MAPLE (GRU context for policy and critics); False: MOPO (the context switched off)."""
+    horizon: int = 10
+    """h, steps per model rollout and per training segment (MAPLE 10; MOPO 5)."""
+    penalty_coef: float = 0.25
+    """λ_u, weight of the uncertainty penalty r − λ_u·u (MAPLE 0.25; MOPO 0.5-5 by task)."""
+    penalty_clip: float = 40.0
+    """Clip of the uncertainty u (SRPO/torch port 40; the TF code 20)."""
+    real_ratio: float = 0.05
+    """Share of real segments in each SAC batch (the rest are model segments)."""
+    rollout_batch_size: int = 50_000
+    """Model rollouts started per training iteration (one iteration = `steps_per_iteration`)."""
+    model_pool_size: int = 250_000
+    """Model segments kept (a ring buffer)."""
+    steps_per_iteration: int = 1000
+    """SAC gradient steps per training iteration (the port's `in_train_epoch`)."""
+    hidden_refresh_every: int = 4
+    """Iterations between refreshes of the real segments' starting hidden states."""
+    gru_hidden: int = 128
+    context_dim: int = 16
+    hiddens: list[int] = dataclasses.field(default_factory=lambda: [256, 256])
+    """Actor and critic MLP sizes after the context."""
+    actor_lr: float = 3e-4
+    critic_lr: float = 3e-4
+    alpha_lr: float = 3e-4
+    """Temperature lr (the port uses the actor's)."""
+    tau: float = 5e-3
+    ensemble_members: int = 7
+    ensemble_elites: int = 5
+    ensemble_hidden: int = 200
+    ensemble_layers: int = 4
+    ensemble_lr: float = 1e-3
+    ensemble_weight_decay: float = 7.5e-5
+    ensemble_batch_size: int = 256
+    ensemble_patience: int = 5
+    """Epochs without any member improving on the holdout before the ensemble stops."""
+    ensemble_max_epochs: int | None = None
+    """Cap on ensemble epochs (None: until `ensemble_patience`, as the port)."""
+    ensemble_cache: str | None = "~/.cache/rllib-asor/maple"
+    """Directory of trained ensembles, keyed by dataset, settings and seed (None: no cache),
+    so that paired runs (MAPLE vs MAPLE+ASOR) share one ensemble."""
+    clip_floor: float = 100.0
+    """Model states are clipped to the data range ± 5 %, but at least to ±clip_floor (the port's
+    `np.maximum(obs_max, 100)`); 0 clips to the data range ± 5 % only."""
+    evaluation_interval: int = 10
+    """Evaluate the policy every this many iterations (0: never; always at iteration 1 off)."""
+    evaluation_episodes: int = 5
+    """Episodes per dynamics and evaluation (SRPO: 40)."""
+
+    @classmethod
+    def from_dict(cls, settings: Mapping[str, Any] | None) -> MapleSettings:
+        """Validated settings; unknown keys and bad values raise ValueError."""
+        settings = dict(settings or {})
+        names = [f.name for f in dataclasses.fields(cls)]
+        for key in settings:
+            if key not in names:
+                close = difflib.get_close_matches(key, names, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise ValueError(
+                    f"maple.{key} is not a MAPLE setting{hint}: allowed {', '.join(names)}"
+                )
+        out = cls(**settings)
+        out.validate()
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def validate(self) -> None:
+        _check(self, "context", lambda v: isinstance(v, bool), "true or false")
+        for key in (
+            "horizon",
+            "rollout_batch_size",
+            "model_pool_size",
+            "steps_per_iteration",
+            "hidden_refresh_every",
+            "gru_hidden",
+            "context_dim",
+            "ensemble_members",
+            "ensemble_elites",
+            "ensemble_hidden",
+            "ensemble_layers",
+            "ensemble_batch_size",
+            "ensemble_patience",
+            "evaluation_episodes",
+        ):
+            _check(self, key, _int_at_least(1), "an integer >= 1")
+        _check(self, "evaluation_interval", _int_at_least(0), "an integer >= 0")
+        _check(
+            self,
+            "ensemble_max_epochs",
+            lambda v: v is None or _int_at_least(1)(v),
+            "null or an integer >= 1",
+        )
+        for key in ("penalty_coef", "penalty_clip", "clip_floor", "ensemble_weight_decay"):
+            _check(self, key, _number(0.0, None), "a number >= 0")
+        for key in ("actor_lr", "critic_lr", "alpha_lr", "ensemble_lr"):
+            _check(self, key, _number(0.0, None, strict=True), "a number > 0")
+        _check(self, "tau", _number(0.0, 1.0, strict=True), "a number in (0, 1]")
+        _check(self, "real_ratio", _number(0.0, 1.0), "a number in [0, 1]")
+        _check(
+            self,
+            "hiddens",
+            lambda v: (
+                isinstance(v, list | tuple) and len(v) > 0 and all(_int_at_least(1)(x) for x in v)
+            ),
+            "a non-empty list of integers >= 1",
+        )
+        _check(
+            self,
+            "ensemble_cache",
+            lambda v: v is None or (isinstance(v, str) and v != ""),
+            "null or a directory path",
+        )
+        if self.ensemble_elites > self.ensemble_members:
+            raise ValueError(
+                f"maple.ensemble_elites={self.ensemble_elites!r} is invalid: allowed an integer "
+                f"<= ensemble_members ({self.ensemble_members})"
+            )
+        self.hiddens = [int(x) for x in self.hiddens]
+
+
+def _int_at_least(lo: int) -> Any:
+    return lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= lo
+
+
+def _number(lo: float, hi: float | None, strict: bool = False) -> Any:
+    def ok(v: Any) -> bool:
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            return False
+        if (v <= lo) if strict else (v < lo):
+            return False
+        return hi is None or v <= hi
+
+    return ok
+
+
+def _check(s: MapleSettings, key: str, ok: Any, allowed: str) -> None:
+    value = getattr(s, key)
+    if not ok(value):
+        raise ValueError(f"maple.{key}={value!r} is invalid: allowed {allowed}")
+
+
+MOPO_DEFAULTS: dict[str, Any] = {"context": False, "horizon": 5, "penalty_coef": 1.0}
+"""MOPO = MAPLE with the context off; h 5 and λ 1 (MOPO's Hopper setting)."""
