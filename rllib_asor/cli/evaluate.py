@@ -25,7 +25,11 @@ CTOR_FILE = "class_and_ctor_args.pkl"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `rllib evaluate`."""
-    parser.add_argument("checkpoint", help="checkpoint dir (or a trial/experiment dir: latest one)")
+    parser.add_argument(
+        "checkpoint",
+        help="checkpoint dir, or a trial dir (its newest checkpoint), or an experiment dir "
+        "(the newest checkpoint of every trial)",
+    )
     parser.add_argument("--episodes", type=int, default=10, help="episodes to run (default 10)")
     parser.add_argument(
         "--explore",
@@ -33,7 +37,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="sample actions from the policy (default: deterministic)",
     )
     parser.add_argument("--seed", type=int, help="seed of the evaluation env")
-    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    parser.add_argument(
+        "--evaluation-config",
+        action="store_true",
+        help="run the env as the config's evaluation_config sets it (e.g. unseen dynamics)",
+    )
+    parser.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object on stdout (a list of them for several trials)",
+    )
 
 
 def find_checkpoint(path: str) -> str:
@@ -57,8 +70,27 @@ def find_checkpoint(path: str) -> str:
     return max(found, key=lambda p: (os.path.getmtime(p), p))
 
 
-def _local_config(path: str, seed: int | None) -> dict[str, Any]:
-    """The checkpoint's config dict, changed to sample locally with one env."""
+def trial_checkpoints(path: str) -> list[str]:
+    """The newest checkpoint of every trial below `path` (a trial = a checkpoint's parent);
+    `[path]` for a checkpoint itself. UsageError when there is none."""
+    path = os.path.abspath(os.path.expanduser(path))
+    if os.path.isdir(path) and not os.path.isfile(os.path.join(path, CHECKPOINT_MARKER)):
+        newest: dict[str, str] = {}
+        for root, dirs, files in os.walk(path, followlinks=True):
+            if CHECKPOINT_MARKER in files and os.path.basename(root).startswith("checkpoint_"):
+                trial = os.path.dirname(root)
+                best = newest.get(trial)
+                if best is None or (os.path.getmtime(root), root) > (os.path.getmtime(best), best):
+                    newest[trial] = root
+                dirs.clear()
+        if len(newest) > 1:
+            return [newest[t] for t in sorted(newest)]
+    return [find_checkpoint(path)]
+
+
+def _local_config(path: str, seed: int | None, evaluation_config: bool = False) -> dict[str, Any]:
+    """The checkpoint's config dict, changed to sample locally with one env (and, with
+    `evaluation_config`, with the settings of its `evaluation_config` but `explore`)."""
     try:
         with open(os.path.join(path, CTOR_FILE), "rb") as f:
             ctor = pickle.load(f)
@@ -69,6 +101,9 @@ def _local_config(path: str, seed: int | None) -> dict[str, Any]:
             source=os.path.join(path, CTOR_FILE),
         ) from None
     config = config.to_dict() if hasattr(config, "to_dict") else dict(config)
+    if evaluation_config:
+        overrides = config.get("evaluation_config") or {}
+        config.update({k: v for k, v in dict(overrides).items() if k != "explore"})
     config.update(
         num_env_runners=0,
         num_envs_per_env_runner=1,
@@ -98,16 +133,23 @@ def _unreadable_file(path: str) -> tuple[str, str] | None:
 
 
 def evaluate(
-    path: str, episodes: int, explore: bool = False, seed: int | None = None
+    path: str,
+    episodes: int,
+    explore: bool = False,
+    seed: int | None = None,
+    evaluation_config: bool = False,
 ) -> dict[str, Any]:
-    """Restore the algorithm at `path` and run `episodes` episodes; return the statistics."""
+    """Restore the algorithm at `path` and run `episodes` episodes; return the statistics,
+    with each episode's ``info["dynamics_id"]`` (None where the env reports none) and the
+    returns per dynamics id."""
     from ray.rllib.algorithms.algorithm import Algorithm
 
     from rllib_asor.cli.cluster import start_ray
+    from rllib_asor.evaluation.dynamics import dynamics_id
     from rllib_asor.registry import envs
 
     quiet.import_quietly("ray.rllib.algorithms.dreamerv3.utils.debugging")  # see its docstring
-    config = _local_config(path, seed)
+    config = _local_config(path, seed, evaluation_config)
     env_id = config.get("env")
     if isinstance(env_id, str):
         envs.register_with_tune(env_id)
@@ -123,6 +165,17 @@ def evaluate(
     done = done[:episodes]
     returns = [float(ep.get_return()) for ep in done]
     lengths = [int(len(ep)) for ep in done]
+    ids = [_jsonable_id(dynamics_id(ep)) for ep in done]
+    per_dynamics: dict[str, dict[str, float]] = {}
+    for ret, did in zip(returns, ids, strict=True):
+        if did is not None:
+            row = per_dynamics.setdefault(str(did), {"episodes": 0, "return_sum": 0.0})
+            row["episodes"] += 1
+            row["return_sum"] += ret
+    per_dynamics = {
+        k: {"episodes": v["episodes"], "return_mean": v["return_sum"] / v["episodes"]}
+        for k, v in sorted(per_dynamics.items())
+    }
     mean = sum(returns) / len(returns)
     std = math.sqrt(sum((r - mean) ** 2 for r in returns) / len(returns))
     return {
@@ -137,7 +190,20 @@ def evaluate(
         "returns": returns,
         "lengths": lengths,
         "episode_metrics": episode_metrics(done),
+        "seed": seed,
+        "evaluation_config": evaluation_config,
+        "dynamics_ids": ids,
+        "per_dynamics": per_dynamics,
     }
+
+
+def _jsonable_id(value: Any) -> Any:
+    """A dynamics id as JSON can hold it (numpy scalars -> Python numbers, else str)."""
+    if value is None or isinstance(value, str | int | float):
+        return value
+    if hasattr(value, "item"):
+        return value.item()
+    return str(value)
 
 
 def episode_metrics(episodes: list[Any]) -> dict[str, float]:
@@ -171,14 +237,31 @@ def _is_number(x: Any) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
-    """`rllib evaluate`: print mean/std return and per-episode returns (or JSON)."""
+    """`rllib evaluate`: print mean/std return and per-episode returns (or JSON); for a folder
+    of several trials, the same for the newest checkpoint of each."""
     if args.episodes < 1:
         raise UsageError(f"{args.episodes} is invalid: allowed an integer >= 1", key="--episodes")
-    path = find_checkpoint(args.checkpoint)
-    stats = evaluate(path, args.episodes, explore=args.explore, seed=args.seed)
+    paths = trial_checkpoints(args.checkpoint)
+    if len(paths) > 1 and not args.json:
+        print(
+            f"{len(paths)} trials under {args.checkpoint}: evaluating the newest checkpoint of each"
+        )
+    results = []
+    for path in paths:
+        stats = evaluate(
+            path, args.episodes, explore=args.explore, seed=args.seed,
+            evaluation_config=args.evaluation_config,
+        )  # fmt: skip
+        results.append(stats)
+        if not args.json:
+            _print(stats)
     if args.json:
-        print(json.dumps(stats))
-        return 0
+        print(json.dumps(results if len(paths) > 1 else results[0]))
+    sys.stdout.flush()
+    return 0
+
+
+def _print(stats: dict[str, Any]) -> None:
     policy = "stochastic (--explore)" if stats["explore"] else "deterministic"
     print(f"checkpoint: {stats['checkpoint']}")
     print(f"env: {stats['env']}  episodes: {stats['episodes']}  policy: {policy}")
@@ -188,10 +271,16 @@ def run(args: argparse.Namespace) -> int:
     )
     print("episode returns: " + " ".join(f"{r:g}" for r in stats["returns"]))
     print("episode lengths: " + " ".join(str(n) for n in stats["lengths"]))
+    if stats["per_dynamics"]:
+        print(
+            "return per dynamics_id: "
+            + "  ".join(
+                f"{k}: {v['return_mean']:.3f} ({v['episodes']} ep)"
+                for k, v in stats["per_dynamics"].items()
+            )
+        )
     if stats["episode_metrics"]:
         print(
             "env metrics (mean over episodes): "
             + "  ".join(f"{k} {v:.3g}" for k, v in stats["episode_metrics"].items())
         )
-    sys.stdout.flush()
-    return 0

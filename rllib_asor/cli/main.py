@@ -1,4 +1,4 @@
-"""`rllib` command: argument parsing and dispatch to train / evaluate / report / compare / data."""
+"""`rllib` command: argument parsing and dispatch to train / evaluate / report / compare / ab / data."""
 
 from __future__ import annotations
 
@@ -21,13 +21,15 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The full `rllib` parser."""
-    from rllib_asor.cli import compare, data, evaluate, quickstart, report, train
+    from rllib_asor.cli import ab, compare, data, evaluate, quickstart, report, train
 
     parser = _Parser(
         prog="rllib", description="Train and evaluate RLlib (new API stack) agents, with ASOR."
     )
     parser.add_argument("--version", action="version", version=_version())
-    sub = parser.add_subparsers(dest="command", metavar="{train,evaluate,report,compare,quickstart,data}")
+    sub = parser.add_subparsers(
+        dest="command", metavar="{train,evaluate,report,compare,ab,quickstart,data}"
+    )
     sub.required = True
     p_train = sub.add_parser(
         "train",
@@ -57,6 +59,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     compare.add_arguments(p_compare)
     p_compare.set_defaults(func=compare.run)
+    p_ab = sub.add_parser(
+        "ab", help="does the file's asor: block help? paired seeds, evaluated (docs/report.md)"
+    )
+    ab.add_arguments(p_ab)
+    _add_verbose(p_ab)
+    p_ab.set_defaults(func=ab.run)
     p_data = sub.add_parser("data", help="offline datasets: collect, info, score (docs/offline.md)")
     data.add_arguments(p_data, common=_add_verbose)
     p_data.set_defaults(func=data.run)

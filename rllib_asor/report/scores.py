@@ -25,6 +25,8 @@ import numpy as np
 from rllib_asor.report.results import Trial
 
 EVAL_FILE = "evaluation.json"
+FINAL_KEY = "final_evaluation/episode_return_mean"
+"""The metric name of the ``final-evaluation`` score (read from `EVAL_FILE`)."""
 TRAIN_KEY = "env_runners/episode_return_mean"
 EVAL_KEY = "evaluation/env_runners/episode_return_mean"
 DYNAMICS = "dynamics"
@@ -61,7 +63,7 @@ def choose_source(trials: Sequence[Trial], metric: str | None = None) -> Source:
         ev = read_evaluation(trials[0]) or {}
         return Source(
             "final-evaluation",
-            EVAL_FILE,
+            FINAL_KEY,
             f"final evaluation return: greedy, {len(ev['returns'])} episodes of each final "
             f"checkpoint, env seed {ev.get('seed')} for every trial ({EVAL_FILE})",
         )

@@ -23,9 +23,10 @@ def _asor_init(base: type[Algorithm]) -> Any:
     def __init__(self: Algorithm, config: Any = None, *args: Any, **kwargs: Any) -> None:
         if isinstance(config, dict) and ASOR_KEY in config:
             config = dict(config)
-            settings = config.pop(ASOR_KEY) or {}
-            algo_config = base.get_default_config().update_from_dict(config)
-            config = with_asor(algo_config, **settings)
+            settings = config.pop(ASOR_KEY)
+            if settings is not None:  # None: no block, the plain algorithm (`rllib ab`'s baseline)
+                algo_config = base.get_default_config().update_from_dict(config)
+                config = with_asor(algo_config, **settings)
         base.__init__(self, config, *args, **kwargs)
 
     return __init__
