@@ -80,17 +80,22 @@ def pairs_needed(diff_mean: float, diff_std: float) -> int | None:
     return math.ceil((z * diff_std / abs(diff_mean)) ** 2)
 
 
+MIN_PAIRS = next(n for n in range(1, 64) if 2 / 2**n < ALPHA)
+"""Fewest pairs with which the two-sided signed-rank test can reach p < 5 % (2/2ⁿ): 6."""
+
+
 def _verdict(p: Paired) -> tuple[str, int | None]:
+    """Decided only when the interval excludes 0 **and** the test agrees (p < 5 %): with few
+    pairs a bootstrap interval can exclude 0 while no test could (2 pairs: p ≥ 0.5)."""
     if p.pairs < 2:
         return "one pair: no interval; run more seeds", None
-    if p.ci_low > 0:
-        return "treatment better: the 95% interval excludes 0", None
-    if p.ci_high < 0:
-        return "treatment worse: the 95% interval excludes 0", None
+    if p.p_value < ALPHA and (p.ci_low > 0 or p.ci_high < 0):
+        side = "better" if p.ci_low > 0 else "worse"
+        return f"treatment {side}: the 95% interval excludes 0 and p < {ALPHA:g}", None
     need = pairs_needed(p.diff_mean, p.diff_std)
     if need is None:
         return "no difference observed", None
-    need = max(need, p.pairs + 1)
+    need = max(need, p.pairs + 1, MIN_PAIRS)
     return (
         f"too wide to decide — about {need} pairs needed for the observed effect "
         f"({p.diff_mean:+.4g}; {POWER:.0%} power, two-sided {ALPHA:.0%})",
