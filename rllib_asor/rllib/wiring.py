@@ -35,12 +35,14 @@ from rllib_asor.rllib.learners import (
     is_aux_module,
     proxy_module_id,
 )
+from rllib_asor.rllib.maple_asor import AsorMapleTorchLearner
 from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 
 SUPPORTED = {
     "PPO": AsorPPOTorchLearner,
     "SAC": AsorSACTorchLearner,
     "CQL": AsorCQLTorchLearner,
+    "MAPLE": AsorMapleTorchLearner,  # MOPO too (a MAPLE subclass)
 }
 assert tuple(sorted(SUPPORTED)) == ALGORITHMS, "one list of supported algorithms (asor.config)"
 
