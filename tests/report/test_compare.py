@@ -192,3 +192,9 @@ def test_cli_bad_input_is_one_line_exit_2(
     assert cli.run(parse(argv)) == 2
     err = capsys.readouterr().err
     assert err.startswith("rllib compare: error: ") and err.count("\n") == 1 and message in err
+
+
+def test_two_pairs_never_decide_even_when_the_interval_excludes_zero() -> None:
+    r = paired_difference({0: 10.0, 1: 20.0}, {0: 11.0, 1: 47.0})
+    assert r.ci_low > 0 and r.p_value == 0.5  # the bootstrap of 2 values spans [1, 27]
+    assert r.verdict.startswith("too wide to decide") and r.pairs_needed >= 6
