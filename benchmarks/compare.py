@@ -94,32 +94,26 @@ def compare(
 
 def compare_paired(baseline: dict[Any, float], treatment: dict[Any, float]) -> dict[str, float]:
     """Seed-by-seed comparison over the seeds in both: diff = mean of (treatment − baseline),
-    its 95% interval over seeds (`rllib_asor.report.stats.bootstrap_ci`, the project's BCa
-    interval of a mean; NaN for one pair), and the one-sided Wilcoxon signed-rank p for
-    treatment > baseline (1 when every difference is 0)."""
-    from scipy.stats import wilcoxon
+    its 95% interval over seeds (the project's BCa interval of a mean; NaN for one pair), and
+    the one-sided Wilcoxon signed-rank p for treatment > baseline (1 when every difference is
+    0). The numbers are `rllib compare`'s (`rllib_asor.report.paired.paired_difference`)."""
+    from rllib_asor.report.paired import paired_difference
 
-    from rllib_asor.report.stats import bootstrap_ci
-
-    seeds = sorted(set(baseline) & set(treatment), key=str)
-    if not seeds:
+    if not set(baseline) & set(treatment):
         raise ValueError("compare_paired needs at least one seed run by both methods")
-    x = np.array([baseline[s] for s in seeds], dtype=float)
-    y = np.array([treatment[s] for s in seeds], dtype=float)
-    d = y - x
-    diff = float(d.mean())
-    lo, hi = bootstrap_ci(d)
-    p = float(wilcoxon(d, alternative="greater").pvalue) if np.any(d != 0) else 1.0
+    r = paired_difference(baseline, treatment, alternative="greater")
+    x = np.array([baseline[s] for s in r.seeds], dtype=float)
+    y = np.array([treatment[s] for s in r.seeds], dtype=float)
     return {
-        "n_pairs": len(seeds),
-        "mean_baseline": float(x.mean()),
+        "n_pairs": r.pairs,
+        "mean_baseline": r.baseline_mean,
         "std_baseline": _std(x),
-        "mean_treatment": float(y.mean()),
+        "mean_treatment": r.treatment_mean,
         "std_treatment": _std(y),
-        "diff": diff,
-        "ci_low": lo,
-        "ci_high": hi,
-        "p_value": p,
+        "diff": r.diff_mean,
+        "ci_low": r.ci_low,
+        "ci_high": r.ci_high,
+        "p_value": r.p_value,
     }
 
 
