@@ -14,6 +14,7 @@ from ray.rllib.algorithms.algorithm import Algorithm
 from ray.tune.registry import get_trainable_cls
 
 from rllib_asor.algorithms.ppo.overlap import OverlappedPPO
+from rllib_asor.registry.algorithms import register_algorithms
 from rllib_asor.rllib.wiring import SUPPORTED, with_asor
 
 ASOR_KEY = "asor"
@@ -33,7 +34,8 @@ def _asor_init(base: type[Algorithm]) -> Any:
 
 
 def asor_trainable(run: str) -> type[Algorithm]:
-    """The Algorithm class for `run` ("PPO", ...) that applies an `"asor"` config block."""
+    """The Algorithm class for `run` ("PPO", ...) that applies an `"asor"` config block; a
+    block that is None leaves the plain algorithm (one trainable for both arms of `rllib ab`)."""
     if run not in SUPPORTED:
         raise ValueError(
             f"ASOR does not support run={run!r}: supported {', '.join(sorted(SUPPORTED))}"
@@ -42,6 +44,7 @@ def asor_trainable(run: str) -> type[Algorithm]:
     cls = globals().get(name)
     if cls is None:
         # PPO: `OverlappedPPO`, which is RLlib's PPO unless the config switches the overlap on.
+        register_algorithms()  # MAPLE
         base = OverlappedPPO if run == "PPO" else get_trainable_cls(run)
         cls = type(
             name,

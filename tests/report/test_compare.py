@@ -198,3 +198,10 @@ def test_two_pairs_never_decide_even_when_the_interval_excludes_zero() -> None:
     r = paired_difference({0: 10.0, 1: 20.0}, {0: 11.0, 1: 47.0})
     assert r.ci_low > 0 and r.p_value == 0.5  # the bootstrap of 2 values spans [1, 27]
     assert r.verdict.startswith("too wide to decide") and r.pairs_needed >= 6
+
+
+def test_compare_reads_the_keys_the_dynamics_callback_writes() -> None:
+    from rllib_asor.evaluation import dynamics
+    from rllib_asor.report import scores
+
+    assert (scores.DYNAMICS, scores.RETURN_LEAF) == (dynamics.METRIC_GROUP, dynamics.RETURN_LEAF)
