@@ -15,10 +15,11 @@ from rllib_asor.envs.registration import register_envs
 register_envs()
 
 if TYPE_CHECKING:
+    from rllib_asor.algorithms.escp.config import EscpConfig
     from rllib_asor.algorithms.maple.maple import MapleConfig, MopoConfig
     from rllib_asor.asor.config import AsorConfig
 
-__all__ = ["AsorConfig", "MapleConfig", "MopoConfig", "with_asor"]
+__all__ = ["AsorConfig", "EscpConfig", "MapleConfig", "MopoConfig", "with_asor"]
 __version__ = "0.1.0"
 
 
@@ -52,4 +53,8 @@ def __getattr__(name: str) -> Any:
         from rllib_asor.algorithms.maple import maple
 
         return getattr(maple, name)
+    if name == "EscpConfig":  # ESCP (issue 23), imported on first use
+        from rllib_asor.algorithms.escp.config import EscpConfig
+
+        return EscpConfig
     raise AttributeError(f"module 'rllib_asor' has no attribute {name!r}")

@@ -22,7 +22,7 @@ REAL_SOURCES = ("batch", "archive")
 SHAPINGS = ("direct", "potential")
 BONUS_NORMS = ("running", "batch", "off")
 PRESET_NAMES = ("robust", "paper")
-ALGORITHMS = ("CQL", "MAPLE", "PPO", "SAC")
+ALGORITHMS = ("CQL", "ESCP", "MAPLE", "PPO", "SAC")
 """RLlib algorithms ASOR works with (`rllib_asor.rllib.wiring` has one Learner class each)."""
 
 PRESETS: dict[str, dict[str, Any]] = {

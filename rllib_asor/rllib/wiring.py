@@ -27,6 +27,7 @@ from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
 from rllib_asor.asor.config import ALGORITHMS, AsorConfig
 from rllib_asor.registry.envs import register_with_tune
 from rllib_asor.rllib.callbacks import AsorMetricsCallback
+from rllib_asor.rllib.escp_asor import AsorESCPTorchLearner
 from rllib_asor.rllib.learners import (
     AsorCQLTorchLearner,
     AsorPPOTorchLearner,
@@ -43,6 +44,7 @@ SUPPORTED = {
     "SAC": AsorSACTorchLearner,
     "CQL": AsorCQLTorchLearner,
     "MAPLE": AsorMapleTorchLearner,  # MOPO too (a MAPLE subclass)
+    "ESCP": AsorESCPTorchLearner,  # ESCP+ASOR, the paper's Algorithm 1
 }
 assert tuple(sorted(SUPPORTED)) == ALGORITHMS, "one list of supported algorithms (asor.config)"
 

@@ -1,0 +1,40 @@
+"""ASOR on ESCP (the paper's Algorithm 1): ESCP's Learner plus the ASOR piece.
+
+The piece runs on each Learner call's batch, built from ESCP's replay rows (windows and task
+ids included), before the gradient steps: V(s) = min Q(s, tanh μ(s, z), z̄_task) ranks the
+states (`escp_state_values`), the discriminator is trained, and r_t += λ·b(s_t) before the TD
+targets, as for SAC (`AsorSACTorchLearner`). ESCP's own encoder, RMDM and critics are
+untouched (`rllib_asor.algorithms.escp`, which knows nothing of ASOR).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ray.rllib.algorithms.sac.torch.sac_torch_learner import SACTorchLearner
+
+from rllib_asor.algorithms.escp.learner import EscpLearnerMixin
+from rllib_asor.algorithms.escp.module import escp_state_values
+from rllib_asor.algorithms.sac.learner import FastSACLearnerMixin
+from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
+from rllib_asor.rllib.learners import _SoftQAsorMixin, is_aux_module
+
+
+class AsorESCPTorchLearner(FastSACLearnerMixin, _SoftQAsorMixin, EscpLearnerMixin, SACTorchLearner):
+    """ESCP's Learner with ASOR's reward augmentation on the fast path's batches."""
+
+    def asor_connector_kwargs(self) -> dict[str, Any]:
+        return {"value_fn": escp_state_values, "gamma": self.config.gamma}
+
+    def flat_batch_module_ids(self) -> list[str]:
+        return [m for m in self.module.keys() if not is_aux_module(m)]
+
+    def _flat_batch_hook(self, batch: dict[str, Any]) -> dict[str, Any]:
+        self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)
+        return batch
+
+    def aux_rows(self, module_id: str) -> float:
+        """One minibatch per Learner call for the aux modules (as `AsorSACTorchLearner`)."""
+        if getattr(self, "_fast_steps", False) and self.asor.aux_epochs is None:
+            return float(self.config.learner_config_dict[MINIBATCH_KEY])
+        return super().aux_rows(module_id)
