@@ -151,18 +151,33 @@ def param_space(named: list[tuple[str, Any, Any]], seeds: int) -> dict[str, Any]
     return out
 
 
-def fit(args: argparse.Namespace, named: list[tuple[str, Any, Any]], path: str) -> Any:
+def trainable_for(named: list[tuple[str, Any, Any]], source: str) -> Any:
+    """One Algorithm class for both arms: ours, where an asor block of None is the plain
+    algorithm; RLlib's when neither arm runs ASOR (`--vs` between two plain files)."""
+    from rllib_asor.cli import experiment
+    from rllib_asor.rllib.trainable import asor_trainable
+
+    exp = named[-1][1]
+    if not any(e.asor is not None for _, e, _ in named):
+        return experiment.algorithm_class(exp)
+    try:
+        return asor_trainable(exp.run)
+    except ValueError as e:
+        raise UsageError(str(e), source=source) from None
+
+
+def fit(
+    args: argparse.Namespace, named: list[tuple[str, Any, Any]], path: str, trainable: Any
+) -> Any:
     """Run (or resume) the Tune experiment at `path`; its ResultGrid."""
     from ray import tune
 
     from rllib_asor.cli import experiment
     from rllib_asor.cli.progress import LineReporter
     from rllib_asor.registry import envs
-    from rllib_asor.rllib.trainable import asor_trainable
 
     exp = named[-1][1]
     envs.register_with_tune(exp.env)
-    trainable = asor_trainable(exp.run)  # an empty asor block (None) is the plain algorithm
     space = param_space(named, args.seeds)
     if tune.Tuner.can_restore(path):
         print(f"rllib ab: resuming {path} (finished trials are kept)", flush=True)
@@ -260,6 +275,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.episodes} is invalid: allowed an integer >= 1", key="--episodes")
     pairs = arms(args)
     named = [(name, exp, _prepare(exp, args)) for name, exp in pairs]
+    trainable = trainable_for(named, args.file)
     exp = pairs[-1][1]
     root = os.path.abspath(
         os.path.expanduser(args.storage_path or exp.storage_path or DEFAULT_STORAGE)
@@ -276,7 +292,7 @@ def run(args: argparse.Namespace) -> int:
     os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
     started = start_ray(None, max(required_cpus(c) for _, _, c in named))
     try:
-        results = fit(args, named, path)
+        results = fit(args, named, path, trainable)
         problems = evaluate_trials(results, args.episodes)
     finally:
         if started:

@@ -142,3 +142,6 @@ def test_ab_bad_input_is_one_line(
     swept = write_yaml(YAML.replace("num_epochs: 1", "num_epochs: {grid_search: [1, 2]}"), "g.yaml")
     assert main(["ab", swept, "--seeds", "2"]) == 2
     assert "grid_search" in capsys.readouterr().err
+    other = write_yaml(YAML.replace("MyVarPole-v0", "CartPole-v1"), "other.yaml")
+    assert main(["ab", plain, "--seeds", "2", "--vs", other]) == 2
+    assert "allowed: the same run and env (paired seeds)" in capsys.readouterr().err
