@@ -114,3 +114,24 @@ def test_cli_train_address_joins_the_running_cluster(cluster, tmp_path):
     assert any(str(j.get("DriverPid")) == str(proc.pid) for j in new_jobs), new_jobs
     [trial] = [p for p in (tmp_path / "lava-ppo-asor").iterdir() if p.is_dir()]
     assert any(trial.glob("checkpoint_*/rllib_checkpoint.json"))
+
+
+def test_sac_asor_learners_on_two_nodes_keep_one_state(cluster):
+    """Off-policy ASOR with one DDP Learner per worker node: it trains and both ranks hold the
+    same discriminator, normalisers and λ (gloo across nodes)."""
+    from tests.cluster.test_many_learners import _assert_same, _per_rank, _sac
+
+    config = _sac().learners(
+        num_learners=2, num_cpus_per_learner=0.5, custom_resources_per_learner={SLOT: 1}
+    )
+    algo = config.build_algo()
+    try:
+        nodes = [c.get() for c in algo.learner_group.foreach_learner(
+            lambda _: ray.get_runtime_context().get_node_id())]
+        assert set(nodes) == {n.node_id for n in cluster.workers}
+        for _ in range(2):
+            result = algo.train()
+        assert result["asor"]["disc_loss"] == result["asor"]["disc_loss"]  # finite, not NaN
+        _assert_same(*_per_rank(algo), "learners on two nodes differ")
+    finally:
+        algo.stop()

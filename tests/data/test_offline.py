@@ -190,3 +190,40 @@ def test_cli_info_on_a_bad_path_exits_2_with_one_line_error(tmp_path, capsys):
     assert rllib_main(["data", "info", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("rllib data: error: no manifest.json in") and "\n" not in err
+
+
+def test_cql_asor_trains_on_two_learners_with_one_state(dataset, tmp_path):
+    from ray.rllib.algorithms.cql import CQLConfig
+
+    from tests.cluster.test_many_learners import _assert_same, _per_rank
+
+    config = (
+        CQLConfig()
+        .env_runners(num_env_runners=0)
+        .learners(num_learners=2, num_cpus_per_learner=0.5)
+        .training(train_batch_size_per_learner=64, bc_iters=0, lr=None)
+        .reporting(min_time_s_per_iteration=0, min_train_timesteps_per_iteration=0)
+    )
+    offline_input(
+        config,
+        dataset,
+        dataset_num_iters_per_learner=2,
+        map_batches_kwargs={"concurrency": 1, "num_cpus": 0.5},
+    )
+    algo = rllib_asor.with_asor(config, seed=0).build_algo()
+    try:
+        for _ in range(2):
+            asor = algo.train()["asor"]
+        assert all(np.isfinite(asor[k]) for k in ("disc_loss", "aug_reward_mean", "rnd_loss"))
+        states = _per_rank(algo)
+        _assert_same(*states, "CQL+ASOR ranks differ after updates")
+        checkpoint = algo.save_to_path(str(tmp_path / "ckpt"))
+    finally:
+        algo.stop()
+    restored = rllib_asor.with_asor(config, seed=0).build_algo()
+    try:
+        restored.restore_from_path(checkpoint)
+        for before, after in zip(states, _per_rank(restored), strict=True):
+            _assert_same(before, after, "CQL+ASOR after restore")
+    finally:
+        restored.stop()

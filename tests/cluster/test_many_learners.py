@@ -1,0 +1,135 @@
+"""ASOR with two DDP Learners (gloo, CPU): it trains, and every piece of its state is the same
+on both ranks after an update and after a checkpoint round trip (docs/algorithm.md, "Many
+Learners")."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.algorithms.sac import SACConfig
+
+import rllib_asor
+from rllib_asor.algorithms.common.ddp import SortedModuleGradientsMixin
+
+FINITE = ("disc_loss", "disc_acc", "aug_reward_mean", "lambda", "real_fraction", "rnd_loss")
+
+
+def _asor_state(learner: Any) -> dict[str, np.ndarray]:
+    """Every parameter and buffer of the ASOR modules of one Learner, by name."""
+    out = {}
+    for mid, module in learner.module._rl_modules.items():
+        if mid.startswith("asor_"):
+            for name, value in module.unwrapped().state_dict().items():
+                out[f"{mid}/{name}"] = value.detach().cpu().numpy().copy()
+    return out
+
+
+def _per_rank(algo: Any) -> list[dict[str, np.ndarray]]:
+    calls = algo.learner_group.foreach_learner(_asor_state)
+    states = [c.get() for c in sorted(calls, key=lambda c: c.actor_id)]
+    assert len(states) == 2
+    return states
+
+
+def _assert_same(a: dict[str, np.ndarray], b: dict[str, np.ndarray], what: str) -> None:
+    assert a.keys() == b.keys(), what
+    differ = [k for k in a if not np.array_equal(a[k], b[k])]
+    assert not differ, f"{what}: {differ}"
+
+
+def _ppo() -> Any:
+    config = (
+        PPOConfig()
+        .environment("CartPole-v1")
+        .env_runners(num_env_runners=1, num_cpus_per_env_runner=0.5)
+        .learners(num_learners=2, num_cpus_per_learner=0.5)
+        .training(train_batch_size_per_learner=128, minibatch_size=64, num_epochs=2)
+        .rl_module(model_config={"fcnet_hiddens": [32]})
+        .debugging(seed=0)
+    )
+    # lambda_ auto and rnd: the auto-λ integral and the RND normaliser are state too.
+    return rllib_asor.with_asor(config, seed=0, lambda_="auto", lambda_warmup=False)
+
+
+def _sac() -> Any:
+    config = (
+        SACConfig()
+        .environment("Pendulum-v1", env_config={"max_episode_steps": 50})
+        .env_runners(num_env_runners=1, num_cpus_per_env_runner=0.5)
+        .learners(num_learners=2, num_cpus_per_learner=0.5)
+        .training(
+            num_steps_sampled_before_learning_starts=64,
+            train_batch_size_per_learner=32,
+            replay_buffer_config={"type": "EpisodeReplayBuffer", "capacity": 10_000},
+        )
+        .rl_module(model_config={"fcnet_hiddens": [32]})
+        .debugging(seed=0)
+    )
+    return rllib_asor.with_asor(config, seed=0, real_source="batch")
+
+
+@pytest.mark.parametrize("make", [_ppo, _sac], ids=["ppo", "sac"])
+def test_asor_trains_on_two_learners_with_one_state(make, ray_session, tmp_path):
+    algo = make().build_algo()
+    try:
+        for _ in range(3):
+            result = algo.train()
+        asor = result["asor"]
+        assert all(math.isfinite(asor[k]) for k in FINITE), asor
+        before = _per_rank(algo)
+        _assert_same(*before, "ranks differ after updates")
+        disc = [k for k in before[0] if "disc." in k and "weight" in k]
+        assert disc, sorted(before[0])
+        if make is _ppo:  # each rank's statistics saw both ranks' rows: every env step sampled
+            (count,) = [v for k, v in before[0].items() if k.endswith("state.reward_rms.count")]
+            assert count == pytest.approx(result["num_env_steps_sampled_lifetime"], abs=1.0)
+        checkpoint = algo.save_to_path(str(tmp_path / "ckpt"))
+    finally:
+        algo.stop()
+    restored = make().build_algo()
+    try:
+        restored.restore_from_path(checkpoint)
+        after = _per_rank(restored)
+        _assert_same(before[0], after[0], "rank 0 after restore")
+        _assert_same(before[1], after[1], "rank 1 after restore")
+        result = restored.train()
+        assert all(math.isfinite(result["asor"][k]) for k in FINITE)
+    finally:
+        restored.stop()
+
+
+class _Base:
+    """A Learner whose per-module gradients record the order they were asked for."""
+
+    def __init__(self) -> None:
+        self._temp_losses: dict[tuple[str, str], Any] = {}
+        self.order: list[str] = []
+
+    def compute_gradients(self, loss_per_module: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        (module_id,) = loss_per_module
+        assert all(k[0] == module_id for k in self._temp_losses)
+        self._temp_losses.clear()
+        self.order.append(module_id)
+        return {module_id: loss_per_module[module_id]}
+
+
+class _Sorted(SortedModuleGradientsMixin, _Base):
+    pass
+
+
+def test_module_gradients_run_in_sorted_order_whatever_the_dict_order():
+    learner = _Sorted()
+    modules = ["policy_b", "asor_disc.policy_b", "policy_a", "asor_proxy.policy_b"]
+    for mid in modules:
+        learner._temp_losses[(mid, "default_optimizer_loss")] = 0.0
+    losses = {m: i for i, m in enumerate(modules)} | {"__all_modules__": 9}
+    grads = learner.compute_gradients(losses)
+    assert learner.order == sorted(modules)
+    assert grads == {m: i for i, m in enumerate(modules)}
+    learner._temp_losses[("ghost", "default_optimizer_loss")] = 0.0
+    with pytest.raises(RuntimeError, match="ghost"):
+        learner.compute_gradients({"policy_a": 1})
