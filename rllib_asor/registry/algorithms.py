@@ -1,0 +1,32 @@
+"""Algorithm names of ours for Tune and the CLI (`run: MAPLE`), next to RLlib's own.
+
+`register_algorithms()` registers each with `ray.tune.register_trainable` (idempotent; cheap
+after the first call), so `get_trainable_cls("MAPLE")` and `rllib train` find them.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+ALGORITHMS = {
+    "MAPLE": "rllib_asor.algorithms.maple.maple:MAPLE",
+    "MOPO": "rllib_asor.algorithms.maple.maple:MOPO",
+    "ESCP": "rllib_asor.algorithms.escp.config:ESCP",
+}
+"""Run name → "module:Class"."""
+
+
+def algorithm(name: str) -> type:
+    """The Algorithm class of one of our run names."""
+    module, _, cls = ALGORITHMS[name].partition(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def register_algorithms() -> None:
+    """Register our algorithms with Tune (once per process)."""
+    from ray.tune.registry import register_trainable
+    from ray.tune.registry import _global_registry, TRAINABLE_CLASS
+
+    for name in ALGORITHMS:
+        if not _global_registry.contains(TRAINABLE_CLASS, name):
+            register_trainable(name, algorithm(name))
