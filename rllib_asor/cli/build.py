@@ -60,6 +60,9 @@ def algorithm_class(exp: Experiment) -> type:
         return OverlappedPPO  # PPO whose env runners sample during the update
     try:
         with quiet():
+            from rllib_asor.registry.algorithms import register_algorithms
+
+            register_algorithms()  # MAPLE, MOPO
             return get_trainable_cls(exp.run)
     except Exception:
         allowed = ", ".join(sorted(ALGORITHMS))

@@ -7,7 +7,7 @@ from typing import Any
 from rllib_asor.cli import legacy
 from rllib_asor.cli.errors import UsageError
 from rllib_asor.cli.offline_inputs import tiny_test_data
-from rllib_asor.cli.spec import DEFAULT_NUM_TO_KEEP, Experiment
+from rllib_asor.cli.spec import DEFAULT_NUM_TO_KEEP, MAPLE_KEY, Experiment
 from rllib_asor.registry.families import family_of
 
 # Settings of `--test`: a tiny local run that works on 2 cores.
@@ -27,6 +27,18 @@ TEST_MINIBATCH = 64
 
 
 TEST_DATASET_ITERS = 2
+
+
+TEST_MAPLE = {
+    "steps_per_iteration": 5,
+    "rollout_batch_size": 256,
+    "model_pool_size": 2560,
+    "ensemble_max_epochs": 2,
+    "ensemble_cache": None,
+    "evaluation_interval": 1,
+    "evaluation_episodes": 1,
+}
+"""`--test` budget of MAPLE/MOPO (`maple:` block): a few steps, no ensemble cache."""
 
 
 def parse_stop_flags(items: list[str] | None) -> dict[str, Any]:
@@ -81,6 +93,8 @@ def apply_overrides(
         cfg["evaluation_interval"] = None
         cfg.pop("train_batch_size_per_learner", None)
         cfg["train_batch_size"] = TEST_BATCH
+        if exp.run in ("MAPLE", "MOPO"):
+            cfg[MAPLE_KEY] = {**(cfg.get(MAPLE_KEY) or {}), **TEST_MAPLE}
         if exp.run.upper() in ("PPO", "APPO", "IMPALA"):
             cfg["minibatch_size"] = TEST_MINIBATCH
             cfg["num_epochs"] = 1

@@ -30,6 +30,8 @@ CHECKPOINT_KEYS = (
 
 
 DEFAULT_NUM_TO_KEEP = 3
+MAPLE_KEY = "maple_settings"
+"""Where a `maple:` block goes (`MapleConfig.maple_settings`; validated in validate.py)."""
 
 
 @dataclass
@@ -124,8 +126,11 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     asor = config.pop("asor", None)
     if asor is not None:
         asor = _mapping(asor, source, f"{name}.config.asor")
+    maple = config.pop("maple", None)
     config, more = legacy.translate_config(config, source, f"{name}.config.")
     warns += more
+    if maple is not None:  # MAPLE/MOPO's own block: the MapleConfig attribute `maple_settings`
+        config[MAPLE_KEY] = _mapping(maple, source, f"{name}.config.maple")
     if "input" in config:
         config["input"] = absolute_input(config["input"])
     stop, more = legacy.translate_stop(

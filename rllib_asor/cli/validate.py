@@ -9,7 +9,7 @@ from rllib_asor.cli.build import algorithm_class, build_algo_config
 from rllib_asor.cli.errors import UsageError, one_line, quiet
 from rllib_asor.cli.offline_inputs import check_offline_input
 from rllib_asor.cli.overrides import checkpoint_kwargs
-from rllib_asor.cli.spec import Experiment
+from rllib_asor.cli.spec import MAPLE_KEY, Experiment
 
 
 def _check_grids(exp: Experiment) -> None:
@@ -65,6 +65,29 @@ def validate_asor(exp: Experiment) -> None:
             ) from None
 
 
+def validate_maple(exp: Experiment) -> None:
+    """A `maple:` block only with run MAPLE or MOPO, validated with `MapleSettings` for every
+    grid candidate."""
+    block = exp.config.get(MAPLE_KEY)
+    if block is None:
+        return
+    key = f"{exp.name}.config.maple"
+    if exp.run not in ("MAPLE", "MOPO"):
+        raise UsageError(
+            f"a maple: block needs run: MAPLE or MOPO, not {exp.run!r}", source=exp.source, key=key
+        )
+    from rllib_asor.algorithms.maple.settings import MapleSettings
+
+    points: list[dict[grid.Path, Any]] = [{}]
+    for path, candidates in grid.find_grids(block):
+        points += [{path: c} for c in candidates]
+    for choice in points:
+        try:
+            MapleSettings.from_dict(grid.with_candidates(block, choice))
+        except (ValueError, TypeError) as e:
+            raise UsageError(one_line(e), source=exp.source, key=key) from None
+
+
 def validate_env(exp: Experiment) -> None:
     """The env id must be registered, and the env must build with each `env_config` candidate."""
     import gymnasium as gym
@@ -103,6 +126,7 @@ def validate(exp: Experiment) -> Any:
     _check_checkpoint_config(exp)
     algorithm_class(exp)
     validate_asor(exp)
+    validate_maple(exp)
     validate_env(exp)
     cfg = None
     points: list[dict[grid.Path, Any]] = [{}]

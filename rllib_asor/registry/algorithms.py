@@ -24,8 +24,7 @@ def algorithm(name: str) -> type:
 
 def register_algorithms() -> None:
     """Register our algorithms with Tune (once per process)."""
-    from ray.tune.registry import register_trainable
-    from ray.tune.registry import _global_registry, TRAINABLE_CLASS
+    from ray.tune.registry import TRAINABLE_CLASS, _global_registry, register_trainable
 
     for name in ALGORITHMS:
         if not _global_registry.contains(TRAINABLE_CLASS, name):

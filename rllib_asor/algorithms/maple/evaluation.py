@@ -62,12 +62,14 @@ def evaluate(
     try:
         for dyn in dynamics or tuple(manifest["datasets"]):
             rets = episode_returns(nets, manifest["env"], dyn, episodes, seed)
+            try:
+                score = normalized_score(float(np.mean(rets)), manifest["task"], manifest, dyn)
+            except ValueError:  # the dataset has no random/expert reference returns
+                score = float("nan")
             out[dyn] = {
                 "return_mean": float(np.mean(rets)),
                 "return_std": float(np.std(rets)),
-                "normalized_score": normalized_score(
-                    float(np.mean(rets)), manifest["task"], manifest, dyn
-                ),
+                "normalized_score": score,
             }
     finally:
         nets.train(was_training)

@@ -94,6 +94,16 @@ class MapleConfig(AlgorithmConfig):
         self.maple_settings = MapleSettings.from_dict(merged).to_dict()
         return self
 
+    def update_from_dict(self, config_dict: dict[str, Any]) -> MapleConfig:
+        """RLlib's, except that `maple_settings` (the YAML `maple:` block) is merged into the
+        current settings (a MOPO config keeps its defaults under a partial block)."""
+        config_dict = dict(config_dict)
+        block = config_dict.pop("maple_settings", None)
+        super().update_from_dict(config_dict)
+        if block is not None:
+            self.maple(**block)
+        return self
+
     @property
     def settings(self) -> MapleSettings:
         return MapleSettings.from_dict(self.maple_settings)

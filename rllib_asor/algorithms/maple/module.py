@@ -17,8 +17,8 @@ from typing import Any
 
 import torch
 from ray.rllib.core.columns import Columns
+from ray.rllib.core.distribution.torch.torch_distribution import TorchSquashedGaussian
 from ray.rllib.core.rl_module.torch import TorchRLModule
-from ray.rllib.models.torch.torch_distributions import TorchSquashedGaussian
 
 from rllib_asor.algorithms.maple.ensemble import GaussianEnsemble
 from rllib_asor.algorithms.maple.networks import MapleNetworks
