@@ -30,6 +30,8 @@ CHECKPOINT_KEYS = (
 
 
 DEFAULT_NUM_TO_KEEP = 3
+ESCP_KEY = "escp_settings"
+"""Where an `escp:` block goes (`EscpConfig.escp_settings`; validated in validate.py)."""
 MAPLE_KEY = "maple_settings"
 """Where a `maple:` block goes (`MapleConfig.maple_settings`; validated in validate.py)."""
 
@@ -127,10 +129,13 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     if asor is not None:
         asor = _mapping(asor, source, f"{name}.config.asor")
     maple = config.pop("maple", None)
+    escp = config.pop("escp", None)
     config, more = legacy.translate_config(config, source, f"{name}.config.")
     warns += more
     if maple is not None:  # MAPLE/MOPO's own block: the MapleConfig attribute `maple_settings`
         config[MAPLE_KEY] = _mapping(maple, source, f"{name}.config.maple")
+    if escp is not None:  # ESCP's own block: the EscpConfig attribute `escp_settings`
+        config[ESCP_KEY] = _mapping(escp, source, f"{name}.config.escp")
     if "input" in config:
         config["input"] = absolute_input(config["input"])
     stop, more = legacy.translate_stop(

@@ -88,6 +88,31 @@ def validate_maple(exp: Experiment) -> None:
             raise UsageError(one_line(e), source=exp.source, key=key) from None
 
 
+def validate_escp(exp: Experiment) -> None:
+    """An `escp:` block only with run ESCP, validated with `EscpSettings` for every grid
+    candidate (one line naming the key, the value and what is allowed)."""
+    from rllib_asor.cli.spec import ESCP_KEY
+
+    block = exp.config.get(ESCP_KEY)
+    if block is None:
+        return
+    key = f"{exp.name}.config.escp"
+    if exp.run != "ESCP":
+        raise UsageError(
+            f"an escp: block needs run: ESCP, not {exp.run!r}", source=exp.source, key=key
+        )
+    from rllib_asor.algorithms.escp.settings import EscpSettings
+
+    points: list[dict[grid.Path, Any]] = [{}]
+    for path, candidates in grid.find_grids(block):
+        points += [{path: c} for c in candidates]
+    for choice in points:
+        try:
+            EscpSettings.from_dict(grid.with_candidates(block, choice))
+        except (ValueError, TypeError) as e:
+            raise UsageError(one_line(e), source=exp.source, key=key) from None
+
+
 def validate_env(exp: Experiment) -> None:
     """The env id must be registered, and the env must build with each `env_config` candidate."""
     import gymnasium as gym
@@ -126,6 +151,7 @@ def validate(exp: Experiment) -> Any:
     _check_checkpoint_config(exp)
     algorithm_class(exp)
     validate_asor(exp)
+    validate_escp(exp)
     validate_maple(exp)
     validate_env(exp)
     cfg = None
