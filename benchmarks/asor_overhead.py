@@ -67,9 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     import rllib_asor.envs  # noqa: F401
 
     start_local_ray(4)
-    from rllib_asor.registry.envs import register_with_tune
+    from rllib_asor.registry.env_names import register_env
 
-    register_with_tune(args.env)  # remote env runners build our ids through Tune's registry
+    register_env(args.env)  # remote env runners build our ids through Tune's registry
     algos = {"PPO": build(args.env, False, args), "PPO+ASOR": build(args.env, True, args)}
     rates: dict[str, list[float]] = {k: [] for k in algos}
     for i in range(args.iters):

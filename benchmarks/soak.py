@@ -202,10 +202,10 @@ def build_algo(args: argparse.Namespace) -> Any:
 
     import rllib_asor
     from rllib_asor.algorithms.common.faults import with_fault_tolerance
-    from rllib_asor.registry.envs import register_with_tune
+    from rllib_asor.registry.env_names import register_env
 
     env = "rllib_asor/LavaWorld-v0"
-    register_with_tune(env)  # remote EnvRunners build it through Tune's registry
+    register_env(env)  # remote EnvRunners build it through Tune's registry
     config = (
         PPOConfig()
         .environment(env, env_config={"obs_mode": "onehot", "layout": "B"})

@@ -174,10 +174,10 @@ def fit(
 
     from rllib_asor.cli import experiment
     from rllib_asor.cli.progress import LineReporter
-    from rllib_asor.registry import envs
+    from rllib_asor.registry import env_names
 
     exp = named[-1][1]
-    envs.register_with_tune(exp.env)
+    env_names.register_env(exp.env)
     space = param_space(named, args.seeds)
     if tune.Tuner.can_restore(path):
         print(f"rllib ab: resuming {path} (finished trials are kept)", flush=True)

@@ -17,7 +17,7 @@ import sys
 from typing import Any
 
 from rllib_asor.cli import quiet
-from rllib_asor.cli.errors import UsageError
+from rllib_asor.cli.errors import UsageError, one_line
 
 CHECKPOINT_MARKER = "rllib_checkpoint.json"
 CTOR_FILE = "class_and_ctor_args.pkl"
@@ -146,13 +146,16 @@ def evaluate(
 
     from rllib_asor.cli.cluster import start_ray
     from rllib_asor.evaluation.dynamics import dynamics_id
-    from rllib_asor.registry import envs
+    from rllib_asor.registry import env_names
 
     quiet.import_quietly("ray.rllib.algorithms.dreamerv3.utils.debugging")  # see its docstring
     config = _local_config(path, seed, evaluation_config)
     env_id = config.get("env")
     if isinstance(env_id, str):
-        envs.register_with_tune(env_id)
+        try:
+            env_names.register_env(env_id)
+        except ValueError as e:
+            raise UsageError(one_line(e), source=path) from None
     bad = _unreadable_file(path)  # before Ray starts: one clean line naming the file
     if bad is not None:
         raise UsageError(f"cannot be read, the checkpoint is damaged ({bad[1]})", source=bad[0])

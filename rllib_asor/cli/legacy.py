@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from rllib_asor.cli import retired
 from rllib_asor.cli.errors import UsageError
 
 # Old config key -> new config key (same value).
@@ -89,14 +90,16 @@ def translate_config(
 ) -> tuple[dict[str, Any], list[str]]:
     """Return (new-stack config dict, warnings); raise UsageError for unsupported legacy values.
 
-    `model: {...}` becomes `model_config: {...}`, `framework: tf` is refused (torch only),
-    `observation_filter: MeanStdFilter` becomes a MeanStdFilter env-to-module connector.
+    `model: {...}` becomes `model_config: {...}`, `observation_filter: MeanStdFilter` becomes a
+    MeanStdFilter env-to-module connector, and the keys the new stack retired go where
+    `retired.py` says (`framework: tf` runs as torch, `horizon` is the env's episode limit, ...).
     """
     out: dict[str, Any] = {}
     warnings: list[str] = []
     model_config: dict[str, Any] = dict(config.get("model_config") or {})
+    into = retired.Into(out, model_config, source, prefix, warnings)
     for key, value in config.items():
-        if key == "model_config":
+        if key == "model_config" or retired.translate(key, value, into):
             continue
         if key in RENAMED_CONFIG_KEYS:
             new = RENAMED_CONFIG_KEYS[key]
@@ -143,15 +146,6 @@ def translate_config(
         elif key in MODEL_CONFIG_TOPLEVEL_KEYS:
             model_config.setdefault(key, value)
             warnings.append(f"{source}: legacy key '{key}' translated to 'model_config.{key}'")
-        elif key == "framework":
-            if value not in ("torch", None):
-                raise UsageError(
-                    f"framework {value!r} is not supported: allowed 'torch' (rllib-asor runs the "
-                    "new API stack with torch only)",
-                    source=source,
-                    key=f"{prefix}framework",
-                )
-            warnings.append(f"{source}: key 'framework: torch' is the default, ignored")
         elif key == "observation_filter":
             if value not in OBSERVATION_FILTERS:
                 raise UsageError(
@@ -171,6 +165,9 @@ def translate_config(
             out[key] = value
     if model_config:
         out["model_config"] = model_config
+    if into.env_config:  # e.g. `horizon`; the file's own env_config wins
+        env_config = out.get("env_config")
+        out["env_config"] = {**into.env_config, **(env_config if isinstance(env_config, dict) else {})}
     return _moved_paths(out, source, warnings), warnings
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 from typing import Any
 
 from rllib_asor.cli.errors import UsageError, quiet
@@ -23,7 +24,8 @@ def check_offline_input(exp: Experiment) -> None:
             "; make the offline datasets first: `make datasets` (about 10 minutes on 2 cores, "
             "docs/offline.md)"
             if any("data/offline" in p for p in missing)
-            else ""
+            else "; give `input:` a dataset folder made by `rllib data collect` (docs/offline.md) "
+            "or RLlib's new-stack offline data (parquet episodes)"
         )
         raise UsageError(
             f"offline input {missing[0]} does not exist{hint}",
@@ -34,7 +36,13 @@ def check_offline_input(exp: Experiment) -> None:
 
 def tiny_test_data(exp: Experiment) -> None:
     """--test on a fresh clone: stand-ins for the missing datasets, in a temporary folder."""
-    missing = missing_inputs(exp.config.get("input"))
+    from rllib_asor.data.format import DYNAMICS, QUALITIES
+
+    missing = [  # only our dataset layout `.../<task>/<dynamics>/<quality>` has stand-ins
+        p
+        for p in missing_inputs(exp.config.get("input"))
+        if Path(p).parent.name in DYNAMICS and Path(p).name in QUALITIES
+    ]
     if not missing:
         return
     import atexit

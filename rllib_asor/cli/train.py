@@ -44,6 +44,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--resume", action="store_true", help="resume the experiment found under the storage path"
     )
     parser.add_argument("--address", help="join a running Ray cluster (HOST:PORT or auto)")
+    parser.add_argument(
+        "--dry-run",
+        "--print-config",
+        action="store_true",
+        dest="dry_run",
+        help="translate and validate only (no Ray): print the warnings and the new-stack YAML",
+    )
     parser.add_argument("--checkpoint-freq", type=int, help="checkpoint every N iterations")
     parser.add_argument(
         "--keep-checkpoints",
@@ -119,6 +126,11 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
         configs.append(experiment.validate(exp))
         if args.resume:
             _check_resumable(os.path.join(storage_path(args, exp), exp.name))
+    if getattr(args, "dry_run", False):
+        from rllib_asor.cli.dry_run import print_experiments
+
+        print_experiments(exps)
+        return []
     from rllib_asor.cli.cluster import probe, start_ray
 
     if args.address:
@@ -164,9 +176,9 @@ def _fit(exp: experiment.Experiment, algo_config: Any, args: argparse.Namespace)
     from ray import tune
 
     from rllib_asor.cli.progress import LineReporter
-    from rllib_asor.registry import envs
+    from rllib_asor.registry import env_names
 
-    envs.register_with_tune(exp.env)
+    env_names.register_env(exp.env)
     trainable = _trainable(exp)
     space = experiment.param_space(exp, algo_config)
     space[RUN_KEY] = exp.run  # the method label of `rllib report` (rllib_asor.report.results)

@@ -114,19 +114,23 @@ def validate_escp(exp: Experiment) -> None:
 
 
 def validate_env(exp: Experiment) -> None:
-    """The env id must be registered, and the env must build with each `env_config` candidate."""
+    """The env must resolve (`registry.env_names`: ids, `module:EnvId`, class paths, old gym
+    ids) and build with each `env_config` candidate; an old id is replaced by its new one."""
     import gymnasium as gym
 
-    from rllib_asor.registry import envs
+    from rllib_asor.registry import env_names, envs
 
     with quiet():
-        if not envs.env_exists(exp.env):
-            raise UsageError(
-                f"unknown env id {exp.env!r}; allowed: {envs.known_ids()}",
-                source=exp.source,
-                key=f"{exp.name}.env",
-            )
-        if exp.env not in gym.registry and exp.env not in envs.race_creators():
+        try:
+            ref = env_names.resolve_env(exp.env)
+        except ValueError as e:
+            raise UsageError(one_line(e), source=exp.source, key=f"{exp.name}.env") from None
+        if ref.note:
+            exp.warnings.append(f"{exp.source}: {ref.note}")
+        plain = ref.module is None and ref.attr is None and ref.spec is None
+        if plain and ref.env_id != exp.env:
+            exp.env = ref.env_id
+        if plain and exp.env not in gym.registry and exp.env not in envs.race_creators():
             return  # registered with Tune by someone else: built only on the env runners
         tree = exp.config.get("env_config") or {}
         points: list[dict[grid.Path, Any]] = [{}]
@@ -135,7 +139,7 @@ def validate_env(exp: Experiment) -> None:
         for choice in points:
             env_config = grid.with_candidates(tree, choice)
             try:
-                envs.make_env(exp.env, env_config).close()
+                env_names.build_env(ref, env_config).close()
             except Exception as e:
                 raise UsageError(
                     f"{exp.env} cannot be built with {env_config!r}: {one_line(e)}",

@@ -1,9 +1,8 @@
-"""Our env ids for RLlib: import the modules that register them, check an id exists, and
-register it with Tune so remote env runners (which never import our packages) can build it."""
+"""Our env ids for RLlib: import the modules that register them, check an id exists, make one.
+`env_names.register_env` registers any env name with Tune so that env runners can build it."""
 
 from __future__ import annotations
 
-import functools
 import importlib
 from typing import Any
 
@@ -43,7 +42,8 @@ def register_race_envs() -> None:
         register()
 
 
-def _in_tune_registry(env_id: str) -> bool:
+def in_tune_registry(env_id: str) -> bool:
+    """True if Tune has a creator registered under `env_id`."""
     from ray.tune.registry import ENV_CREATOR, _global_registry
 
     return _global_registry.contains(ENV_CREATOR, env_id)
@@ -55,7 +55,7 @@ def env_exists(env_id: str) -> bool:
 
     import_registering_modules()
     register_race_envs()
-    return env_id in gym.registry or _in_tune_registry(env_id)
+    return env_id in gym.registry or in_tune_registry(env_id)
 
 
 def known_ids(limit: int = 12) -> str:
@@ -80,17 +80,3 @@ def make_env(env_id: str, env_config: Any) -> Any:
     if creator is not None:
         return creator(env_config)
     return gym.make(env_id, **dict(env_config or {}))
-
-
-def register_with_tune(env_id: str) -> None:
-    """Register a picklable creator for a gymnasium id, so env runners can build it.
-
-    Ids already registered with Tune by someone else (e.g. a PettingZoo wrapper) are kept.
-    """
-    import gymnasium as gym
-    from ray import tune
-
-    import_registering_modules()
-    register_race_envs()
-    if env_id in gym.registry and not _in_tune_registry(env_id):
-        tune.register_env(env_id, functools.partial(make_env, env_id))

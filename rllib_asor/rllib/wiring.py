@@ -25,7 +25,7 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from rllib_asor.algorithms.common.callbacks import add_callbacks
 from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
 from rllib_asor.asor.config import ALGORITHMS, AsorConfig
-from rllib_asor.registry.envs import register_with_tune
+from rllib_asor.registry.env_names import register_env
 from rllib_asor.rllib.callbacks import AsorMetricsCallback
 from rllib_asor.rllib.escp_asor import AsorESCPTorchLearner
 from rllib_asor.rllib.learners import (
@@ -91,7 +91,7 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
 
     config = config.copy(copy_frozen=False)
     if isinstance(config.env, str):
-        register_with_tune(config.env)  # remote env runners can then build our env ids
+        register_env(config.env)  # env runners (other processes, nodes) can then build it
     if algo in ("SAC", "CQL") and _wants_fast_path(config, asor):
         config = fast_off_policy(config)
     asor_dict = asor.to_dict()

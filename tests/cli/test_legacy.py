@@ -74,11 +74,13 @@ def test_unreachable_address_fails_before_legacy_warnings_are_printed(write_yaml
     assert "127.0.0.1:1" in err
 
 
-def test_framework_tf_is_refused_with_torch_only_message(write_yaml):
+def test_framework_tf_runs_as_torch_and_an_unknown_framework_is_refused(write_yaml):
     path = write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  config: {framework: tf2}\n")
-    with pytest.raises(
-        UsageError, match=r"x\.config\.framework: framework 'tf2' is not supported: allowed 'torch'"
-    ):
+    [exp] = experiment.load_file(path)
+    assert "framework" not in exp.config
+    assert any("'framework: tf2' runs as torch" in w for w in exp.warnings)
+    path = write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  config: {framework: jax}\n")
+    with pytest.raises(UsageError, match=r"x\.config\.framework: framework 'jax' is invalid"):
         experiment.load_file(path)
 
 

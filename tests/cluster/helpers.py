@@ -9,7 +9,7 @@ from ray.rllib.algorithms.ppo import PPOConfig
 
 import rllib_asor
 import rllib_asor.envs  # noqa: F401  (registers rllib_asor/LavaWorld-v0)
-from rllib_asor.registry.envs import register_with_tune
+from rllib_asor.registry.env_names import register_env
 
 LAVA = "rllib_asor/LavaWorld-v0"
 ASOR_KEYS = ("disc_loss", "disc_acc", "aug_reward_mean", "real_fraction", "rnd_loss")
@@ -22,7 +22,7 @@ def lava_ppo_asor(env: str = LAVA, env_config: dict | None = None, **runners: An
     does) so that remote EnvRunners, which never imported `rllib_asor.envs`, can build it.
     """
     if env == LAVA:
-        register_with_tune(LAVA)
+        register_env(LAVA)
     config = (
         PPOConfig()
         .environment(env, env_config=env_config or {})

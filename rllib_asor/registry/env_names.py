@@ -1,0 +1,230 @@
+"""Every way people name an env, resolved to something every process can build.
+
+`resolve_env(name)` accepts, in this order:
+- an id known here: ours, the race's, gymnasium's, one registered with Tune;
+- gymnasium's `module:EnvId` (the module registers the id when imported);
+- a class or creator function as `package.module:Name` or `package.module.Name` (RLlib's own
+  example envs also under their old module paths, `ray.rllib.examples.env.*`);
+- an old version of a gymnasium id (`Pendulum-v0`, `Hopper-v1`, `HalfCheetah-v3`) → the newest
+  version that runs here;
+- an id registered by a module of the user's on `PYTHONPATH` (or in the working directory)
+  that this process has not imported yet: the module whose source names the id is imported;
+- an id the calling script registered with `gym.register` (its spec travels to the workers).
+
+`build_env(ref, env_config)` makes the env in any process (driver or env runner): it imports the
+module first, so a Tune creator holding the `EnvRef` works on every node that can import it.
+A name that cannot be resolved raises `ValueError` with one line: what is wrong, and what to do.
+"""
+
+from __future__ import annotations
+
+import difflib
+import functools
+import importlib
+import inspect
+import os
+import re
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rllib_asor.registry import envs
+
+# Old module path prefix -> where RLlib moved it (Ray 2.10: examples/env -> examples/envs/classes).
+MOVED_ENV_MODULES = {"ray.rllib.examples.env.": "ray.rllib.examples.envs.classes."}
+_VERSIONED = re.compile(r"^(?P<base>.+)-v(?P<version>\d+)$")
+_SCAN_LIMIT = 500  # .py files looked at per PYTHONPATH folder
+
+
+@dataclass(frozen=True)
+class EnvRef:
+    """How to build an env a user named: import `module`, then make `env_id` (gymnasium), call
+    `attr` (a class or creator in `module`), or make `spec` (registered by the driver only)."""
+
+    name: str
+    env_id: str | None = None
+    module: str | None = None
+    attr: str | None = None
+    spec: Any = None
+    note: str | None = None
+    """What was translated, for a warning (e.g. an old gym id), else None."""
+
+
+def resolve_env(name: str) -> EnvRef:
+    """The `EnvRef` for `name` (see the module docstring); ValueError if there is none."""
+    import gymnasium as gym
+
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"env {name!r} is invalid: allowed an env id or 'package.module:Class'")
+    if envs.env_exists(name):
+        return _known(name, gym.registry.get(name))
+    if ":" in name:
+        module, _, attr = name.partition(":")
+        return _from_module(name, module, attr)
+    newer = newer_version(name)
+    if newer is not None:
+        return EnvRef(name, env_id=newer, note=f"env id '{name}' translated to '{newer}'")
+    if "." in name and not _VERSIONED.match(name):
+        module, _, attr = name.rpartition(".")
+        return _from_module(name, module, attr)
+    module = _registering_module(name)
+    if module is not None:
+        return EnvRef(name, env_id=name, module=module)
+    raise ValueError(_unknown_id(name))
+
+
+def _known(name: str, spec: Any) -> EnvRef:
+    """A registered id; a spec registered by the calling script (not importable elsewhere)
+    travels with the ref."""
+    if (
+        spec is None
+        or isinstance(spec.entry_point, str)
+        and spec.entry_point.startswith(
+            ("gymnasium.", "rllib_asor.", "game_env.", "highway_env.", "ale_py", "shimmy")
+        )
+    ):
+        return EnvRef(name, env_id=name)
+    if _raises_on_make(spec):
+        newer = newer_version(name)
+        if newer is not None:
+            return EnvRef(name, env_id=newer, note=f"env id '{name}' translated to '{newer}'")
+    return EnvRef(name, env_id=name, spec=spec)
+
+
+def _raises_on_make(spec: Any) -> bool:
+    """gymnasium keeps MuJoCo v2/v3 ids whose entry point only raises (they need mujoco-py)."""
+    return getattr(spec.entry_point, "__name__", "").startswith("_raise")
+
+
+def newer_version(name: str) -> str | None:
+    """The newest runnable registered version of an older or unrunnable `Name-vN`, else None."""
+    import gymnasium as gym
+
+    match = _VERSIONED.match(name)
+    if match is None:
+        return None
+    base, version = match["base"], int(match["version"])
+    runnable = [
+        int(m["version"])
+        for key, spec in gym.registry.items()
+        if (m := _VERSIONED.match(key)) and m["base"] == base and not _raises_on_make(spec)
+    ]
+    if not runnable or max(runnable) <= version and f"{base}-v{version}" not in gym.registry:
+        return None
+    newest = max(runnable)
+    return f"{base}-v{newest}" if newest != version else None
+
+
+def _from_module(name: str, module: str, attr: str) -> EnvRef:
+    """`module:attr` / `module.attr`: a gymnasium id the module registers, or a class/creator."""
+    import gymnasium as gym
+
+    imported = _import(name, module)
+    if attr in gym.registry:
+        return EnvRef(name, env_id=attr, module=imported)
+    obj = getattr(sys.modules[imported], attr, None)
+    if obj is None or not callable(obj):
+        raise ValueError(
+            f"env {name!r}: module {imported!r} has no env class, creator function or registered "
+            f"gymnasium id {attr!r}"
+        )
+    return EnvRef(name, module=imported, attr=attr)
+
+
+def _import(name: str, module: str) -> str:
+    """Import `module` (or its moved RLlib path); the name that imported, or ValueError."""
+    candidates = [module] + [
+        new + module[len(old) :] for old, new in MOVED_ENV_MODULES.items() if module.startswith(old)
+    ]
+    error: BaseException | None = None
+    for candidate in candidates:
+        try:
+            importlib.import_module(candidate)
+            return candidate
+        except ImportError as e:
+            error = error or e
+    path = os.environ.get("PYTHONPATH", "")
+    raise ValueError(
+        f"env {name!r}: module {module!r} cannot be imported ({error}); put it on PYTHONPATH "
+        f"(now {path!r}) or run from its folder"
+    )
+
+
+def _registering_module(env_id: str) -> str | None:
+    """A top-level module in the working directory or on PYTHONPATH whose source names
+    `env_id` and whose import registers it; None if there is none."""
+    import gymnasium as gym
+
+    folders = [os.getcwd(), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    quoted = (f'"{env_id}"', f"'{env_id}'")
+    for folder in dict.fromkeys(folders):
+        for path in sorted(Path(folder).glob("*.py"))[:_SCAN_LIMIT]:
+            try:
+                text = path.read_text(encoding="utf-8", errors="ignore")
+            except OSError:
+                continue
+            if not any(q in text for q in quoted):
+                continue
+            if folder not in sys.path:
+                sys.path.insert(0, folder)
+            try:
+                importlib.import_module(path.stem)
+            except Exception:  # not the user's env module after all; keep looking
+                continue
+            if env_id in gym.registry:
+                return path.stem
+    return None
+
+
+def _unknown_id(name: str) -> str:
+    import gymnasium as gym
+
+    close = difflib.get_close_matches(name, list(gym.registry), n=3, cutoff=0.6)
+    hint = f"did you mean {' or '.join(close)}? " if close else ""
+    return (
+        f"unknown env id {name!r}; {hint}allowed: {envs.known_ids()}, 'module:EnvId' "
+        "(gymnasium), or an env class 'package.module:Class' on PYTHONPATH"
+    )
+
+
+def build_env(ref: EnvRef, env_config: Any = None) -> Any:
+    """The env `ref` names, made in this process (imports its module first)."""
+    import gymnasium as gym
+
+    config = dict(env_config or {})
+    if ref.module is not None:
+        importlib.import_module(ref.module)
+    if ref.attr is not None:
+        return _call(getattr(sys.modules[ref.module], ref.attr), env_config, config)
+    if ref.spec is not None:
+        return gym.make(ref.spec, **config)
+    return envs.make_env(ref.env_id, config)
+
+
+def _call(factory: Any, env_config: Any, config: dict[str, Any]) -> Any:
+    """RLlib's convention (one `env_config` argument) when the class/function takes one
+    positional argument; gymnasium's (keyword arguments) otherwise."""
+    try:
+        params = list(inspect.signature(factory).parameters.values())
+    except (TypeError, ValueError):
+        return factory(env_config if env_config is not None else config)
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    takes_config = positional and (
+        positional[0].default is inspect.Parameter.empty
+        or positional[0].name in ("config", "env_config", "env_context")
+    )
+    if takes_config:
+        return factory(env_config if env_config is not None else config)
+    return factory(**config)
+
+
+def register_env(name: str) -> EnvRef:
+    """Resolve `name` and register a Tune creator for it under that name, so env runners on
+    every node build it (a creator someone else registered is kept). ValueError if unknown."""
+    from ray import tune
+
+    ref = resolve_env(name)
+    if not envs.in_tune_registry(name):
+        tune.register_env(name, functools.partial(build_env, ref))
+    return ref

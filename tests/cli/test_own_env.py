@@ -1,0 +1,143 @@
+"""A user's own env, in their own module outside the package, named every way people name envs:
+`rllib train file --test` trains it, `rllib evaluate` evaluates it, and a Python script with
+RLlib's PPOConfig + `with_asor` trains it after a plain `gym.register`."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+RLLIB = str(Path(sys.executable).with_name("rllib"))
+
+MODULE = '''
+import gymnasium as gym
+from gymnasium.envs.classic_control.cartpole import CartPoleEnv
+
+
+class VarPoleCartPole(CartPoleEnv):
+    """CartPole whose pole length is drawn per episode; info["dynamics_id"] says which."""
+
+    LENGTHS = (0.5, 1.0, 1.5)
+
+    def __init__(self, render_mode=None):
+        super().__init__(render_mode=render_mode)
+        self.dynamics_id = 0
+
+    def reset(self, *, seed=None, options=None):
+        obs, info = super().reset(seed=seed, options=options)
+        self.dynamics_id = int(self.np_random.integers(len(self.LENGTHS)))
+        self.length = self.LENGTHS[self.dynamics_id]
+        self.polemass_length = self.masspole * self.length
+        return obs, {**info, "dynamics_id": self.dynamics_id}
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = super().step(action)
+        return obs, reward, terminated, truncated, {**info, "dynamics_id": self.dynamics_id}
+
+
+gym.register("MyVarPole-v0", entry_point="myenv:VarPoleCartPole", max_episode_steps=100)
+'''
+
+
+@pytest.fixture(scope="module")
+def user(tmp_path_factory):
+    """A folder with the user's module (on PYTHONPATH) and a different working directory."""
+    root = tmp_path_factory.mktemp("user")
+    (root / "code").mkdir()
+    (root / "code" / "myenv.py").write_text(MODULE)
+    (root / "work").mkdir()
+    env = {**os.environ, "PYTHONPATH": str(root / "code"), "RAY_memory_monitor_refresh_ms": "0"}
+    return root, env
+
+
+def _yaml(root: Path, env_name: str, asor: bool = True) -> Path:
+    path = root / "work" / f"exp-{abs(hash(env_name))}.yaml"
+    lines = ["own-env:", f"    env: {env_name}", "    run: PPO", "    config:",
+             "        train_batch_size: 256"]
+    path.write_text("\n".join(lines + (["        asor: {seed: 0}"] if asor else [])) + "\n")
+    return path
+
+
+def _rllib(args: list[str], user_env: dict, cwd: Path, timeout: int = 300):
+    return subprocess.run([RLLIB, *args], capture_output=True, text=True, timeout=timeout,
+                          env=user_env, cwd=cwd)
+
+
+@pytest.mark.parametrize(
+    "env_name",
+    ["MyVarPole-v0", "myenv:MyVarPole-v0", "myenv.VarPoleCartPole", "myenv:VarPoleCartPole"],
+)
+def test_every_way_of_naming_the_env_validates(user, env_name):
+    root, env = user
+    proc = _rllib(["train", "file", str(_yaml(root, env_name)), "--dry-run"], env, root / "work")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert f"env: {env_name}" in proc.stdout
+
+
+def test_own_env_by_plain_id_trains_with_test_and_is_evaluated(user):
+    root, env = user
+    results = root / "results"
+    proc = _rllib(["train", "file", str(_yaml(root, "MyVarPole-v0")), "--test",
+                   "--storage-path", str(results)], env, root / "work")
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert "1 trial(s), 0 errored" in proc.stdout
+    ev = _rllib(["evaluate", str(results / "own-env"), "--episodes", "3"], env, root / "work")
+    assert ev.returncode == 0, (ev.stdout + ev.stderr)[-3000:]
+    assert "Traceback" not in ev.stderr
+    assert "dynamics" in ev.stdout.lower()
+
+
+def test_own_env_class_path_trains_with_test(user):
+    root, env = user
+    proc = _rllib(["train", "file", str(_yaml(root, "myenv.VarPoleCartPole", asor=False)),
+                   "--test", "--storage-path", str(root / "results2")], env, root / "work")
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+
+
+def test_python_script_registers_its_env_and_trains_with_asor(user):
+    root, env = user
+    script = root / "work" / "train_mine.py"
+    script.write_text(textwrap.dedent("""\
+        import math
+        import gymnasium as gym
+        import ray
+        from ray.rllib.algorithms.ppo import PPOConfig
+        import rllib_asor
+
+        gym.register("MyScriptPole-v0", entry_point="myenv:VarPoleCartPole", max_episode_steps=50)
+        ray.init(num_cpus=2, include_dashboard=False)
+        config = (PPOConfig().environment("MyScriptPole-v0")
+                  .env_runners(num_env_runners=1, num_cpus_per_env_runner=0.5)
+                  .training(train_batch_size=128, minibatch_size=64, num_epochs=1))
+        algo = rllib_asor.with_asor(config, seed=0).build_algo()
+        result = algo.train()
+        assert math.isfinite(result["asor"]["disc_loss"]), result["asor"]
+        print("TRAINED", result["env_runners"]["num_episodes"])
+        algo.stop()
+        """))
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=300, env=env, cwd=root / "work")
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert "TRAINED" in proc.stdout
+
+
+@pytest.mark.parametrize(
+    ("env_name", "fragments"),
+    [
+        ("CartPole-v9", ("unknown env id 'CartPole-v9'", "did you mean CartPole-v")),
+        ("nosuchmodule.Env", ("module 'nosuchmodule' cannot be imported", "PYTHONPATH")),
+        ("myenv:NoSuchThing", ("module 'myenv' has no env class",)),
+    ],
+)
+def test_an_env_that_cannot_run_is_refused_in_one_line(user, env_name, fragments):
+    root, env = user
+    proc = _rllib(["train", "file", str(_yaml(root, env_name)), "--dry-run"], env, root / "work")
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert all(f in lines[0] for f in fragments), lines[0]
