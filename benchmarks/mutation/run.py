@@ -1,0 +1,196 @@
+"""Mutation testing, one package at a time (issue 27; docs/testing.md).
+
+    python -m benchmarks.mutation.run                  # every package of packages.toml, in order
+    python -m benchmarks.mutation.run asor glue        # some of them
+    python -m benchmarks.mutation.run --report asor    # only summarise the last run
+
+For each package: the working tree (tracked and untracked-but-not-ignored files) is copied to
+build/mutation/<package>/, the package's [tool.mutmut] settings are appended to that copy's
+pyproject.toml, and `mutmut run` is started there under `nice -n 19` (so mutmut's `mutants/`
+sandbox never appears in the checkout, and a second run reuses the first one's results for
+every function whose source and tests did not change). Then the kill ratio is computed:
+
+    killed / (mutants − equivalent)       killed includes timeouts; "no tests" counts as survived
+
+with the equivalent mutants listed, each with its reason, in equivalent.toml. The summary goes
+to stdout and to build/mutation/<package>.json. The exit status is 1 when a package is below
+its threshold or a survivor is neither killed nor listed as equivalent (and --check is given).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+BUILD = ROOT / "build" / "mutation"
+
+KILLED = {1, 3, 36, -24, 24, 152, 255}  # failed tests, pytest internal error, timeouts
+SURVIVED = {0}
+NO_TESTS = {5, 33}
+SKIPPED = {34}
+
+
+def load_packages() -> tuple[dict, dict]:
+    data = tomllib.loads((HERE / "packages.toml").read_text())
+    return data.get("defaults", {}), data["package"]
+
+
+def load_equivalent() -> dict[str, dict[str, str]]:
+    path = HERE / "equivalent.toml"
+    return tomllib.loads(path.read_text()) if path.exists() else {}
+
+
+def _toml_list(values: list[str]) -> str:
+    return "[" + ", ".join(json.dumps(v) for v in values) + "]"
+
+
+def sync_tree(dest: Path) -> None:
+    """Copy the working tree's tracked and untracked-not-ignored files to dest (only the
+    changed ones, so mutmut's caches stay valid), and delete files no longer there."""
+    out = subprocess.run(
+        ["git", "ls-files", "-co", "--exclude-standard", "-z"],
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+    ).stdout.decode()
+    files = {f for f in out.split("\0") if f and (ROOT / f).is_file()}
+    for rel in files:
+        src, dst = ROOT / rel, dest / rel
+        if dst.exists() and dst.stat().st_mtime == src.stat().st_mtime:
+            if dst.stat().st_size == src.stat().st_size:
+                continue
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(src, dst)
+    for sub in ("rllib_asor", "game_env", "tests"):
+        for path in (dest / sub).rglob("*.py") if (dest / sub).exists() else ():
+            if str(path.relative_to(dest)) not in files:
+                path.unlink()
+
+
+def write_config(dest: Path, defaults: dict, pkg: dict) -> None:
+    base = (ROOT / "pyproject.toml").read_text()
+    skip = list(defaults.get("skip_lines", [])) + list(pkg.get("skip_lines", []))
+    section = "\n".join(
+        [
+            "",
+            "[tool.mutmut]",
+            f"source_paths = {_toml_list(pkg['source_paths'])}",
+            f"only_mutate = {_toml_list(pkg['only_mutate'])}",
+            f"pytest_add_cli_args_test_selection = {_toml_list(pkg['tests'])}",
+            f"pytest_add_cli_args = {_toml_list(['-p', 'no:randomly', '-q'])}",
+            f"do_not_mutate_patterns = {_toml_list(skip)}",
+            "",
+        ]
+    )
+    path = dest / "pyproject.toml"
+    text = base + section
+    if not path.exists() or path.read_text() != text:
+        path.write_text(text)
+
+
+def run_mutmut(dest: Path, children: int) -> int:
+    mutmut = Path(sys.executable).with_name("mutmut")
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0")
+    cmd = ["nice", "-n", "19", str(mutmut), "run", "--max-children", str(children)]
+    print("+", " ".join(cmd), f"(in {dest})", flush=True)
+    return subprocess.run(cmd, cwd=dest, env=env).returncode
+
+
+def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> dict:
+    counts = {"killed": 0, "survived": 0, "no_tests": 0, "skipped": 0, "other": 0}
+    survivors: list[str] = []
+    names: set[str] = set()
+    for meta in sorted((dest / "mutants").rglob("*.py.meta")):
+        rel = meta.relative_to(dest / "mutants").as_posix()[: -len(".meta")]
+        if not any(Path(rel).match(g) or rel.startswith(g.rstrip("*")) for g in pkg["only_mutate"]):
+            continue
+        for key, code in json.loads(meta.read_text())["exit_code_by_key"].items():
+            names.add(key)
+            if code in KILLED:
+                counts["killed"] += 1
+            elif code in SKIPPED:
+                counts["skipped"] += 1
+            elif code in SURVIVED or code in NO_TESTS:
+                counts["survived" if code in SURVIVED else "no_tests"] += 1
+                survivors.append(key)
+            else:
+                counts["other"] += 1
+                survivors.append(key)
+    equiv = [s for s in survivors if s in equivalent]
+    open_survivors = [s for s in survivors if s not in equivalent]
+    total = sum(counts.values()) - counts["skipped"]
+    scored = total - len(equiv)
+    ratio = counts["killed"] / scored if scored else 1.0
+    return {
+        "package": name,
+        "mutants": total,
+        **counts,
+        "equivalent": len(equiv),
+        "kill_ratio": round(ratio, 4),
+        "threshold": pkg.get("threshold", 0.8),
+        "open_survivors": open_survivors,
+        "stale_equivalents": sorted(set(equivalent) - set(survivors)),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    defaults, packages = load_packages()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("packages", nargs="*", help=f"of {', '.join(packages)} (default: all)")
+    ap.add_argument("--report", action="store_true", help="only summarise the last run")
+    ap.add_argument("--children", type=int, default=2, help="mutants tested at once (2)")
+    ap.add_argument("--check", action="store_true", help="exit 1 below a threshold")
+    args = ap.parse_args(argv)
+    names = args.packages or list(packages)
+    unknown = [n for n in names if n not in packages]
+    if unknown:
+        ap.error(f"unknown package(s) {unknown}; known: {list(packages)}")
+    equivalent = load_equivalent()
+    ok = True
+    summaries = []
+    for name in names:
+        pkg, dest = packages[name], BUILD / name
+        if not args.report:
+            dest.mkdir(parents=True, exist_ok=True)
+            sync_tree(dest)
+            write_config(dest, defaults, pkg)
+            rc = run_mutmut(dest, args.children)
+            if rc != 0:
+                print(f"mutmut run for {name} exited {rc}", file=sys.stderr)
+                ok = False
+        summary = summarise(name, dest, pkg, equivalent.get(name, {}))
+        (BUILD / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
+        summaries.append(summary)
+        below = summary["kill_ratio"] < summary["threshold"]
+        ok = ok and not below
+        print(
+            f"{name}: {summary['killed']} killed of {summary['mutants']} mutants, "
+            f"{summary['equivalent']} equivalent, {len(summary['open_survivors'])} open "
+            f"survivors -> kill ratio {summary['kill_ratio']:.1%} "
+            f"(threshold {summary['threshold']:.0%}{', BELOW' if below else ''})"
+        )
+        for s in summary["open_survivors"]:
+            print(f"  survived: {s}")
+        for s in summary["stale_equivalents"]:
+            print(f"  listed as equivalent but not a survivor (stale entry?): {s}")
+    groups: dict[str, list[dict]] = {}
+    for s in summaries:
+        groups.setdefault(packages[s["package"]].get("group", "others"), []).append(s)
+    for group, members in sorted(groups.items()):
+        killed = sum(s["killed"] for s in members)
+        scored = sum(s["mutants"] - s["equivalent"] for s in members)
+        print(f"group {group} ({', '.join(s['package'] for s in members)}): "
+              f"{killed}/{scored} = {killed / max(scored, 1):.1%}")
+    return 0 if ok or not args.check else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

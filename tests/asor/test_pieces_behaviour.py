@@ -1,0 +1,139 @@
+"""Exact values of ASOR's small pieces on hand-made inputs (issue 27, mutation survivors):
+the discriminator's loss, statistics and regularisers, the archive's sampling, the partition's
+random mode and sizes, the bonus standardisation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from rllib_asor.asor.archive import StateArchive
+from rllib_asor.asor.discriminator import Discriminator, discriminator_loss
+from rllib_asor.asor.partition import partition, real_set_size
+from rllib_asor.asor.reward import standardize
+
+
+# ------------------------------------------------------------------ discriminator loss
+def test_loss_is_the_class_balanced_mean_of_the_smoothed_bce():
+    logits = torch.tensor([2.0, -1.0, 0.5, 3.0])
+    labels = torch.tensor([1.0, 1.0, 1.0, 0.0])  # three real, one fake: balance matters
+    eps = 0.1
+    loss, stats = discriminator_loss(logits, labels, label_smoothing=eps)
+    real_bce = F.binary_cross_entropy_with_logits(logits[:3], torch.full((3,), 1 - eps))
+    fake_bce = F.binary_cross_entropy_with_logits(logits[3:], torch.full((1,), eps))
+    assert loss.item() == pytest.approx(0.5 * (real_bce + fake_bce).item(), rel=1e-6)
+    # the statistics use the unsmoothed labels
+    raw_real = F.binary_cross_entropy_with_logits(logits[:3], torch.ones(3)).item()
+    raw_fake = F.binary_cross_entropy_with_logits(logits[3:], torch.zeros(1)).item()
+    assert stats["disc_bce_real"].item() == pytest.approx(raw_real, rel=1e-6)
+    assert stats["disc_bce_fake"].item() == pytest.approx(raw_fake, rel=1e-6)
+    assert stats["js_estimate"].item() == pytest.approx(math.log(2) - 0.5 * (raw_real + raw_fake), rel=1e-6)
+    assert stats["disc_loss"].item() == pytest.approx(loss.item())
+    assert stats["disc_acc_real"].item() == pytest.approx(2 / 3)
+    assert stats["disc_acc_fake"].item() == 0.0
+
+
+def test_accuracy_counts_only_the_right_side_of_zero_and_entropy_is_exact():
+    logits = torch.tensor([0.0, 0.5, 0.0, -0.5])
+    labels = torch.tensor([1.0, 1.0, 0.0, 0.0])
+    _, stats = discriminator_loss(logits, labels)
+    assert stats["disc_acc_real"].item() == 0.5 and stats["disc_acc_fake"].item() == 0.5
+    p = torch.sigmoid(logits)
+    entropy = -(p * p.log() + (1 - p) * (1 - p).log()).mean()
+    assert stats["disc_entropy"].item() == pytest.approx(entropy.item(), rel=1e-6)
+    _, stats = discriminator_loss(torch.zeros(2), torch.tensor([1.0, 0.0]))
+    assert stats["disc_entropy"].item() == pytest.approx(math.log(2), rel=1e-6)
+    _, empty = discriminator_loss(torch.zeros(0), torch.zeros(0))
+    assert empty["disc_entropy"].item() == 0.0 and empty["disc_loss"].item() == 0.0
+
+
+def test_one_sided_batch_has_no_nan():
+    loss, stats = discriminator_loss(torch.tensor([1.0, 2.0]), torch.ones(2))
+    assert torch.isfinite(loss) and stats["disc_acc_fake"].item() == 0.0
+    assert stats["disc_bce_fake"].item() == 0.0
+
+
+# ------------------------------------------------------------------ regularisers
+def linear_disc(weight):
+    disc = Discriminator(len(weight), hiddens=[])
+    with torch.no_grad():
+        disc.net[0].weight.copy_(torch.tensor([weight]))
+    return disc
+
+
+def test_logit_regulariser_is_the_squared_output_weights():
+    disc = linear_disc([1.0, 2.0, -2.0])
+    loss, stats = disc.regularizer(torch.randn(4, 3), grad_penalty=0.0, logit_reg=0.5)
+    assert loss.item() == pytest.approx(0.5 * 9.0)
+    assert stats["disc_grad_penalty"].item() == 0.0  # switched off: not computed
+    assert stats["disc_logit_norm"].item() == pytest.approx(3.0)
+    loss, _ = disc.regularizer(torch.randn(4, 3), grad_penalty=0.0, logit_reg=0.0)
+    assert loss.item() == 0.0
+
+
+def test_gradient_penalty_on_one_real_sample_and_none():
+    disc = linear_disc([1.0, 2.0, -2.0])
+    loss, stats = disc.regularizer(torch.randn(1, 3), grad_penalty=0.5, logit_reg=0.0)
+    assert stats["disc_grad_penalty"].item() == pytest.approx(9.0)
+    assert loss.item() == pytest.approx(4.5)
+    loss, stats = disc.regularizer(torch.zeros(0, 3), grad_penalty=0.5, logit_reg=0.0)
+    assert loss.item() == 0.0 and stats["disc_grad_penalty"].item() == 0.0
+
+
+def test_gradient_penalty_is_taken_on_the_normalised_input():
+    disc = Discriminator(2, hiddens=[], input_norm=True)
+    with torch.no_grad():
+        disc.net[0].weight.copy_(torch.tensor([[1.0, 1.0]]))
+    disc.observe(torch.randn(4096, 2, generator=torch.Generator().manual_seed(0)) * 10.0)
+    _, stats = disc.regularizer(torch.zeros(3, 2), grad_penalty=1.0, logit_reg=0.0)
+    assert stats["disc_grad_penalty"].item() == pytest.approx(2.0)  # ∂/∂z of w·z, not of x
+
+
+# ------------------------------------------------------------------ archive sampling
+def test_sampling_an_empty_archive_or_nothing_gives_empty_tensors_of_the_feature_width():
+    arch = StateArchive(feature_dim=4, capacity=3, buckets=2)
+    feats, rtg = arch.sample(5)
+    assert feats.shape == (0, 4) and rtg.shape == (0,)
+    arch.insert(torch.ones(1, 4), torch.ones(1), 1.0, dynamics_id=1)
+    feats, rtg = arch.sample(0)
+    assert feats.shape == (0, 4) and rtg.shape == (0,)
+    feats, rtg = arch.sample(5)  # one state in one bucket: drawn once, without replacement
+    assert feats.shape == (1, 4) and rtg.tolist() == [1.0]
+
+
+def test_sampling_follows_the_generator():
+    arch = StateArchive(feature_dim=1, capacity=50, buckets=1)
+    arch.insert(torch.arange(50.0).reshape(50, 1), torch.arange(50.0), 1.0, dynamics_id=0)
+    a, _ = arch.sample(10, torch.Generator().manual_seed(3))
+    b, _ = arch.sample(10, torch.Generator().manual_seed(3))
+    c, _ = arch.sample(10, torch.Generator().manual_seed(4))
+    assert torch.equal(a, b) and not torch.equal(a, c) and len(a.unique()) == 10
+
+
+# ------------------------------------------------------------------ partition
+def test_real_set_size_of_an_empty_and_a_small_batch():
+    assert real_set_size(0, 0.5, 0.5) == 0
+    assert real_set_size(10, 0.5, 0.5) == 3  # ⌈0.5·⌈0.5·10⌉⌉
+    assert real_set_size(10, 0.5, 0.5, "srpo") == 5
+    assert real_set_size(10, 0.5, 0.3, "count") == 3
+
+
+def test_random_mode_follows_a_torch_generator():
+    values = np.arange(20.0)
+    a = partition(values, None, 0.5, 0.5, mode="random", rng=torch.Generator().manual_seed(1))
+    b = partition(values, None, 0.5, 0.5, mode="random", rng=torch.Generator().manual_seed(1))
+    c = partition(values, None, 0.5, 0.5, mode="random", rng=torch.Generator().manual_seed(2))
+    assert a.sum() == 5 and np.array_equal(a, b) and not np.array_equal(a, c)
+
+
+# ------------------------------------------------------------------ bonus standardisation
+def test_standardising_a_constant_bonus_gives_zeros_not_nan():
+    b = torch.full((4,), 0.7)
+    z = standardize(b, b.mean(), b.var(unbiased=False), clip=3.0)
+    assert torch.equal(z, torch.zeros(4))
+    z = standardize(torch.tensor([0.0, 2.0]), torch.tensor(1.0), torch.tensor(1.0), clip=3.0)
+    assert torch.allclose(z, torch.tensor([-1.0, 1.0]), atol=1e-6)

@@ -1,0 +1,232 @@
+"""The ASOR ↔ RLlib glue on a real PPO Learner built in this process (no Ray started), fed
+hand-made episodes (issue 27): the discriminator is trained by the Learner's update, the archive
+is filled in the update that ends the episodes, the rewards GAE sees are r + λ·b, every piece of
+ASOR state survives the Learner's checkpoint (auto-λ among the cases), the aux modules train
+their passes without changing the policy's minibatch count."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.core import DEFAULT_MODULE_ID, Columns
+from ray.rllib.env.single_agent_episode import SingleAgentEpisode
+from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
+
+import rllib_asor
+from rllib_asor.asor.reward import reward_bonus
+from rllib_asor.rllib.callbacks import lift_asor_metrics
+from rllib_asor.rllib.connector import AsorRewardConnector, SharedValuesGAE
+from rllib_asor.rllib.learners import disc_module_id, is_aux_module, proxy_module_id
+from tests.asor.test_state_behaviour import pieces
+
+OBS = gym.spaces.Box(-10, 10, (3,), np.float32)
+ACT = gym.spaces.Discrete(2)
+DISC, PROXY = disc_module_id(DEFAULT_MODULE_ID), proxy_module_id(DEFAULT_MODULE_ID)
+SMALL = {"disc_hiddens": [16], "rnd_hiddens": [16], "rnd_embedding_dim": 8, "seed": 0}
+
+
+def learner(**asor):
+    config = (
+        PPOConfig()
+        .environment(observation_space=OBS, action_space=ACT)
+        .training(train_batch_size=60, minibatch_size=30, num_epochs=2, lr=1e-3)
+        .rl_module(model_config={"fcnet_hiddens": [16]})
+        .debugging(seed=0)
+    )
+    config = rllib_asor.with_asor(config, **(SMALL | asor))
+    spaces = {"__env__": (OBS, ACT), DEFAULT_MODULE_ID: (OBS, ACT)}
+    return config.build_learner(env=None, spaces=spaces)
+
+
+def episodes(seed: int, n: int = 6, length: int = 10, terminated: bool = True, ids: bool = True):
+    """Paying episodes (odd) in the +2 cluster of observations, the others in the −2 cluster."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        centre = 2.0 if i % 2 else -2.0
+        obs = lambda c=centre: (rng.normal(size=3) * 0.3 + c).astype(np.float32)  # noqa: E731
+        ep = SingleAgentEpisode(observation_space=OBS, action_space=ACT)
+        info = {"dynamics_id": i % 3} if ids else {}
+        ep.add_env_reset(observation=obs(), infos=info)
+        for t in range(length):
+            last = t == length - 1
+            ep.add_env_step(
+                observation=obs(),
+                action=int(rng.integers(2)),
+                reward=(1.0 if i % 2 else 0.0) if last else -0.02,
+                infos=info,
+                terminated=terminated and last,
+                extra_model_outputs={
+                    Columns.ACTION_LOGP: np.float32(-0.69),
+                    Columns.ACTION_DIST_INPUTS: np.zeros(2, np.float32),
+                },
+            )
+        out.append(ep.to_numpy())
+    return out
+
+
+def update(lrn, eps, step=60):
+    return lrn.update(
+        episodes=eps,
+        timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: step},
+        minibatch_size=30,
+        num_epochs=2,
+    )
+
+
+def module_batch(lrn, eps):
+    """What the Learner connector gives the loss (rewards after ASOR, before GAE's columns)."""
+    return lrn._learner_connector(rl_module=lrn.module, batch={}, episodes=eps, metrics=lrn.metrics)
+
+
+# ------------------------------------------------------------------ training
+def test_the_learners_update_trains_the_discriminator_and_fills_the_archive():
+    lrn = learner(mode="srpo", lambda_warmup=False, disc_lr=1e-2)
+    disc = lrn.module[DISC]
+    before = {k: v.clone() for k, v in disc.state.disc.net.state_dict().items()}
+    policy_before = {k: v.clone() for k, v in lrn.module[DEFAULT_MODULE_ID].state_dict().items()}
+    results = update(lrn, episodes(0))
+    # the episodes ended in this update: their 60 states are archived (3 dynamics buckets)
+    assert disc.state.archive.bucket_sizes()[:3] == [20, 20, 20]
+    assert disc.state.archive.open_episodes == 0
+    after = disc.state.disc.net.state_dict()
+    assert all(not torch.equal(after[k], before[k]) for k in before)
+    assert any(
+        not torch.equal(v, policy_before[k])
+        for k, v in lrn.module[DEFAULT_MODULE_ID].state_dict().items()
+    )
+    accs = []
+    for i in range(1, 15):
+        results = update(lrn, episodes(i), step=60 * (i + 1))
+        lifted = lift_asor_metrics(_flat(results))
+        accs.append(lifted["disc_acc"])
+    assert lifted["archive_states"] > 60 and lifted["real_fraction"] > 0
+    assert {"disc_loss", "js_estimate", "lambda", "aug_reward_mean", "disc_grad_penalty"} <= set(lifted)
+    # The real set (the best archived states) is the +2 cluster: ω separates it.
+    with torch.no_grad():
+        good = torch.as_tensor(np.stack([e.get_observations(0) for e in episodes(99)[1::2]]))
+        bad = torch.as_tensor(np.stack([e.get_observations(0) for e in episodes(99)[0::2]]))
+        assert disc.logits(good).mean() > disc.logits(bad).mean()
+    assert accs[-1] > accs[0] or accs[0] > 0.9
+
+
+def _flat(results):
+    """Learner results (MetricsLogger stats) as plain floats, like an iteration's result."""
+    def value(v):
+        return float(v.peek() if hasattr(v, "peek") else v)
+
+    return {
+        "learners": {
+            mid: {k: value(v) for k, v in stats.items() if not isinstance(v, dict)}
+            for mid, stats in results.items()
+            if isinstance(stats, dict)
+        }
+    }
+
+
+def test_the_proxy_is_trained_on_the_batch_and_the_policy_keeps_its_minibatches():
+    lrn = learner()
+    proxy = lrn.module[PROXY].proxy.rnd
+    w = proxy.predictor[0].weight.clone()
+    update(lrn, episodes(0))
+    assert not torch.equal(proxy.predictor[0].weight, w)
+    assert not any(p.requires_grad for p in proxy.target.parameters())
+    # the proxy's batch is the policy's 60 valid rows, trained once (aux_epochs unset)
+    piece = lrn._asor_piece
+    assert piece.aux_batch_sizes[PROXY] == 60 and lrn.aux_rows(PROXY) == 60
+    assert lrn._asor_rows_trained[PROXY] == 60
+    assert piece.aux_batch_sizes[DISC] > 60  # archive states + the batch
+    # two epochs of the 60-row (plus bootstrap rows) policy batch in minibatches of 30
+    assert lrn._asor_rows_trained[DISC] >= piece.aux_batch_sizes[DISC]
+    opt = lrn.get_optimizer(DISC)
+    assert isinstance(opt, torch.optim.Adam) and opt.param_groups[0]["weight_decay"] == 1e-4
+    assert lrn.get_optimizer(PROXY).param_groups[0]["weight_decay"] == 0.0
+    assert lrn._get_optimizer_lr(lrn.get_optimizer(DISC)) == pytest.approx(3e-4)
+    assert lrn._get_optimizer_lr(lrn.get_optimizer(PROXY)) == pytest.approx(1e-3)
+
+
+def test_aux_epochs_sets_the_rows_the_aux_modules_train_on():
+    rows = {}
+    for epochs in (0.5, 3):
+        lrn = learner(aux_epochs=epochs)
+        update(lrn, episodes(0))
+        assert lrn.aux_rows(PROXY) == 60 * epochs
+        rows[epochs] = lrn._asor_rows_trained[PROXY]
+    # Half a pass: one minibatch of 30 rows, then the proxy leaves the iterator. Three passes
+    # would be 180 rows, but the aux modules never add minibatches to the policy's: 2 epochs
+    # of its 66 rows (60 steps + 6 bootstrap rows) in minibatches of 30 are 5, so 150 rows.
+    assert rows == {0.5: 30, 3: 150}
+
+
+# ------------------------------------------------------------------ rewards
+def test_rewards_before_gae_are_the_env_rewards_plus_lambda_times_log_omega():
+    lrn = learner(preset="paper", mode="srpo", lambda_=0.1)
+    eps = episodes(0)
+    env_rewards = np.concatenate([np.append(e.get_rewards(), 0.0) for e in eps])
+    batch = module_batch(lrn, episodes(0))
+    pb = batch[DEFAULT_MODULE_ID]
+    mask = pb[Columns.LOSS_MASK].bool()
+    with torch.no_grad():
+        logits = lrn.module[DISC].logits(pb[Columns.OBS][mask].float())
+    expected = torch.as_tensor(env_rewards, dtype=torch.float32)[mask] + 0.1 * reward_bonus(logits, "log")
+    assert torch.allclose(pb[Columns.REWARDS][mask].float(), expected, atol=1e-5)
+    # the advantages were computed from these rewards, with the values ASOR's pass shared
+    assert Columns.ADVANTAGES in pb and Columns.VALUE_TARGETS in pb
+    # the discriminator's and the proxy's batches are in the same train batch
+    assert batch[DISC][Columns.OBS].shape == (60, 3) and batch[DISC]["asor_label"].sum() == 30
+    pieces_in_pipeline = [type(c) for c in lrn._learner_connector.connectors]
+    assert pieces_in_pipeline.index(AsorRewardConnector) < pieces_in_pipeline.index(SharedValuesGAE)
+
+
+def test_shared_values_are_the_critics_values():
+    lrn = learner(preset="paper", mode="srpo", lambda_=0.0)
+    batch = module_batch(lrn, episodes(0))
+    pb = batch[DEFAULT_MODULE_ID]
+    with torch.no_grad():
+        vf = lrn.module[DEFAULT_MODULE_ID].compute_values({Columns.OBS: pb[Columns.OBS]})
+    # λ = 0: rewards unchanged, so the value targets are GAE's with the critic's own values
+    mask = pb[Columns.LOSS_MASK].bool()
+    adv = pb[Columns.VALUE_TARGETS] - vf
+    assert torch.allclose(adv[mask], pb[Columns.ADVANTAGES][mask] * 0 + adv[mask])
+    # bootstrap rows hold V(s_T) of truncated chunks; terminated ones have target = reward
+    last = torch.nonzero(mask).squeeze(-1)[9]  # the last valid row of the first episode
+    assert pb[Columns.VALUE_TARGETS][last].item() == pytest.approx(pb[Columns.REWARDS][last].item(), abs=1e-5)
+
+
+def test_rnd_per_dynamics_reads_the_dynamics_ids_of_the_episodes():
+    lrn = learner(proxy="rnd_per_dynamics", dynamics_buckets=4)
+    update(lrn, episodes(0))
+    assert lrn.module[PROXY].proxy.rnd.seen.tolist() == [1.0, 1.0, 1.0, 0.0]
+    with pytest.raises(ValueError, match="dynamics_id"):
+        update(lrn, episodes(1, ids=False))
+
+
+# ------------------------------------------------------------------ checkpoints
+@pytest.mark.parametrize(
+    "settings",
+    [
+        {"lambda_": "auto", "lambda_init": 0.3, "lambda_lr": 0.5, "bonus_norm": "running"},
+        {"preset": "paper", "proxy": "ensemble", "disc_input_norm": True},
+    ],
+    ids=["robust_auto_lambda", "paper_ensemble"],
+)
+def test_every_piece_of_state_survives_the_learners_checkpoint(settings, tmp_path):
+    lrn = learner(**settings)
+    for i in range(3):
+        update(lrn, episodes(i), step=60 * (i + 1))
+    state, proxy = lrn.module[DISC].state, lrn.module[PROXY].proxy
+    saved = pieces(state, proxy)
+    lrn.save_to_path(tmp_path / "learner")
+    other = learner(**(settings | {"seed": 5}))
+    fresh = pieces(other.module[DISC].state, other.module[PROXY].proxy)
+    assert fresh["auto_lambda"] != saved["auto_lambda"] or settings.get("lambda_") != "auto"
+    assert not torch.equal(fresh["disc.0.weight"], saved["disc.0.weight"])
+    other.restore_from_path(tmp_path / "learner")
+    restored = pieces(other.module[DISC].state, other.module[PROXY].proxy)
+    assert restored.keys() == saved.keys()
+    for name, value in saved.items():
+        assert torch.allclose(restored[name], value, rtol=1e-6, atol=0), name
+    assert all(is_aux_module(m) or m == DEFAULT_MODULE_ID for m in other.module.keys())
