@@ -72,7 +72,22 @@ def _sac() -> Any:
     return rllib_asor.with_asor(config, seed=0, real_source="batch")
 
 
-@pytest.mark.parametrize("make", [_ppo, _sac], ids=["ppo", "sac"])
+def _escp() -> Any:
+    config = (
+        rllib_asor.EscpConfig()
+        .environment("rllib_asor/HalfCheetahShift-v0", env_config={"max_episode_steps": 40})
+        .env_runners(num_env_runners=1, num_cpus_per_env_runner=0.5)
+        .learners(num_learners=2, num_cpus_per_learner=0.5)
+        .escp(history_len=4, rmdm_min_replay=0)
+        .training(num_steps_sampled_before_learning_starts=80, train_batch_size_per_learner=32)
+        .reporting(min_sample_timesteps_per_iteration=80)
+        .rl_module(model_config={"fcnet_hiddens": [32]})
+        .debugging(seed=0)
+    )
+    return rllib_asor.with_asor(config, seed=0, real_source="batch")
+
+
+@pytest.mark.parametrize("make", [_ppo, _sac, _escp], ids=["ppo", "sac", "escp"])
 def test_asor_trains_on_two_learners_with_one_state(make, ray_session, tmp_path):
     algo = make().build_algo()
     try:

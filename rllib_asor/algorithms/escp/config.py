@@ -57,6 +57,10 @@ class EscpConfig(SACConfig):
         self.replay_buffer_config = {"type": "EpisodeReplayBuffer", "capacity": 1_000_000}
         self._model_config = {"fcnet_hiddens": [128, 64], "fcnet_activation": "leaky_relu"}
         self.escp_settings: dict[str, Any] = EscpSettings().to_dict()
+        # With several Learners (DDP): the encoder learns from RMDM alone, which is off until
+        # enough tasks are in the replay (and per batch), so it legitimately has no gradient
+        # in those updates; DDP must be told (tests/cluster/test_many_learners.py).
+        self.torch_ddp_kwargs = {"find_unused_parameters": True}
 
     def escp(self, **settings: Any) -> EscpConfig:
         """Set ESCP's settings (fields of `EscpSettings`); ValueError names a bad key/value."""
