@@ -56,5 +56,18 @@ datasets: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m benchmarks.run_all
 
+# Mutation testing (docs/testing.md; not part of `make test`): one mutmut run per package of
+# benchmarks/mutation/packages.toml, under nice, in build/mutation/<package>/. Long on 2 cores:
+# pick packages with MUTATION_PACKAGES="asor legacy"; MUTATION_ARGS="--rerun-open" retests only
+# the last run's survivors (after new tests), "--report" only prints the kill ratios.
+MUTMUT_VERSION      ?= 3.8.1
+MUTATION_PACKAGES   ?=
+MUTATION_ARGS       ?= --check
+.PHONY: mutation
+mutation: $(STAMP)
+	$(PY) -c "import mutmut" 2>/dev/null || \
+	  $(PY) -m pip install -q "mutmut==$(MUTMUT_VERSION)" $(PIP_FILTER)
+	$(PY) -m benchmarks.mutation.run $(MUTATION_ARGS) $(MUTATION_PACKAGES)
+
 clean:
 	rm -rf $(VENV) *.egg-info

@@ -20,6 +20,7 @@ its threshold or a survivor is neither killed nor listed as equivalent (and --ch
 from __future__ import annotations
 
 import argparse
+import fnmatch
 import json
 import os
 import shutil
@@ -41,6 +42,11 @@ SKIPPED = {34}
 def load_packages() -> tuple[dict, dict]:
     data = tomllib.loads((HERE / "packages.toml").read_text())
     return data.get("defaults", {}), data["package"]
+
+
+def _listed(mutant: str, equivalent: dict[str, str]) -> bool:
+    """Whether `mutant` is listed as equivalent (a name, or a glob over names)."""
+    return mutant in equivalent or any(fnmatch.fnmatch(mutant, p) for p in equivalent)
 
 
 def load_equivalent() -> dict[str, dict[str, str]]:
@@ -96,16 +102,17 @@ def write_config(dest: Path, defaults: dict, pkg: dict) -> None:
         path.write_text(text)
 
 
-def run_mutmut(dest: Path, children: int) -> int:
+def run_mutmut(dest: Path, children: int, names: list[str]) -> int:
     mutmut = Path(sys.executable).with_name("mutmut")
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0")
-    cmd = ["nice", "-n", "19", str(mutmut), "run", "--max-children", str(children)]
-    print("+", " ".join(cmd), f"(in {dest})", flush=True)
+    cmd = ["nice", "-n", "19", str(mutmut), "run", "--max-children", str(children), *names]
+    print("+", " ".join(cmd[:8]), f"(+{len(names)} mutant names)" if names else "", f"(in {dest})",
+          flush=True)
     return subprocess.run(cmd, cwd=dest, env=env).returncode
 
 
 def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> dict:
-    counts = {"killed": 0, "survived": 0, "no_tests": 0, "skipped": 0, "other": 0}
+    counts = {"killed": 0, "survived": 0, "no_tests": 0, "skipped": 0, "other": 0, "not_checked": 0}
     survivors: list[str] = []
     names: set[str] = set()
     for meta in sorted((dest / "mutants").rglob("*.py.meta")):
@@ -113,20 +120,24 @@ def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> d
         if not any(Path(rel).match(g) or rel.startswith(g.rstrip("*")) for g in pkg["only_mutate"]):
             continue
         for key, code in json.loads(meta.read_text())["exit_code_by_key"].items():
+            if pkg.get("mutants") and not any(fnmatch.fnmatch(key, p) for p in pkg["mutants"]):
+                continue
             names.add(key)
             if code in KILLED:
                 counts["killed"] += 1
             elif code in SKIPPED:
                 counts["skipped"] += 1
+            elif code is None:  # the run was stopped before this mutant
+                counts["not_checked"] += 1
             elif code in SURVIVED or code in NO_TESTS:
                 counts["survived" if code in SURVIVED else "no_tests"] += 1
                 survivors.append(key)
             else:
                 counts["other"] += 1
                 survivors.append(key)
-    equiv = [s for s in survivors if s in equivalent]
-    open_survivors = [s for s in survivors if s not in equivalent]
-    total = sum(counts.values()) - counts["skipped"]
+    total = sum(counts.values()) - counts["skipped"] - counts["not_checked"]
+    equiv = [s for s in survivors if _listed(s, equivalent)]
+    open_survivors = [s for s in survivors if not _listed(s, equivalent)]
     scored = total - len(equiv)
     ratio = counts["killed"] / scored if scored else 1.0
     return {
@@ -137,7 +148,9 @@ def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> d
         "kill_ratio": round(ratio, 4),
         "threshold": pkg.get("threshold", 0.8),
         "open_survivors": open_survivors,
-        "stale_equivalents": sorted(set(equivalent) - set(survivors)),
+        "stale_equivalents": sorted(
+            p for p in equivalent if not any(fnmatch.fnmatch(s, p) for s in survivors)
+        ),
     }
 
 
@@ -148,6 +161,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report", action="store_true", help="only summarise the last run")
     ap.add_argument("--children", type=int, default=2, help="mutants tested at once (2)")
     ap.add_argument("--check", action="store_true", help="exit 1 below a threshold")
+    ap.add_argument(
+        "--rerun-open",
+        action="store_true",
+        help="test again the survivors and untested mutants of the last run (after new tests)",
+    )
     args = ap.parse_args(argv)
     names = args.packages or list(packages)
     unknown = [n for n in names if n not in packages]
@@ -162,7 +180,11 @@ def main(argv: list[str] | None = None) -> int:
             dest.mkdir(parents=True, exist_ok=True)
             sync_tree(dest)
             write_config(dest, defaults, pkg)
-            rc = run_mutmut(dest, args.children)
+            names = list(pkg.get("mutants", []))
+            if args.rerun_open and (dest / "mutants").exists():
+                last = summarise(name, dest, pkg, equivalent.get(name, {}))
+                names = last["open_survivors"] or names
+            rc = run_mutmut(dest, args.children, names)
             if rc != 0:
                 print(f"mutmut run for {name} exited {rc}", file=sys.stderr)
                 ok = False
@@ -172,7 +194,8 @@ def main(argv: list[str] | None = None) -> int:
         below = summary["kill_ratio"] < summary["threshold"]
         ok = ok and not below
         print(
-            f"{name}: {summary['killed']} killed of {summary['mutants']} mutants, "
+            f"{name}: {summary['killed']} killed of {summary['mutants']} mutants tested "
+            f"({summary['not_checked']} not yet), "
             f"{summary['equivalent']} equivalent, {len(summary['open_survivors'])} open "
             f"survivors -> kill ratio {summary['kill_ratio']:.1%} "
             f"(threshold {summary['threshold']:.0%}{', BELOW' if below else ''})"

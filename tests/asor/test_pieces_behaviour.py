@@ -137,3 +137,56 @@ def test_standardising_a_constant_bonus_gives_zeros_not_nan():
     assert torch.equal(z, torch.zeros(4))
     z = standardize(torch.tensor([0.0, 2.0]), torch.tensor(1.0), torch.tensor(1.0), clip=3.0)
     assert torch.allclose(z, torch.tensor([-1.0, 1.0]), atol=1e-6)
+
+
+def test_one_state_is_drawn_and_empty_buckets_take_no_share():
+    arch = StateArchive(feature_dim=1, capacity=50, buckets=2)
+    arch.insert(torch.arange(50.0).reshape(50, 1), torch.arange(50.0), 1.0, dynamics_id=1)
+    assert arch.sample(1)[0].shape == (1, 1)
+    assert arch.sample(10)[0].shape == (10, 1)  # all from the one filled bucket
+
+
+def test_chunks_without_termination_flags_are_archived_when_they_stop_arriving():
+    from rllib_asor.asor.config import AsorConfig
+    from rllib_asor.asor.update import AsorBatch, AsorState, Chunk, asor_update
+
+    cfg = AsorConfig(mode="srpo", disc_hiddens=[4], seed=0)
+    state = AsorState(cfg, 2)
+    batch = AsorBatch(
+        features=torch.randn(4, 2),
+        env_rewards=torch.ones(4),
+        values=torch.arange(4.0),
+        gamma=0.9,
+        chunks=[Chunk("a", 0, 2), Chunk("b", 2, 4)],
+    )
+    rng = np.random.default_rng(0)
+    asor_update(cfg, state, None, batch, rng)
+    assert len(state.archive) == 0 and state.archive.open_episodes == 2
+    batch.chunks = [Chunk("c", 0, 4)]
+    asor_update(cfg, state, None, batch, rng)
+    assert len(state.archive) == 4 and state.archive.open_episodes == 1
+
+
+def test_normalising_a_constant_feature_is_finite_and_clipped_both_ways():
+    from rllib_asor.asor.networks import RunningMeanStd
+
+    rms = RunningMeanStd(2)
+    rms.update(torch.tensor([[1.0, 0.0], [1.0, 2.0]] * 500))
+    z = rms.normalize(torch.tensor([[1.0, -100.0], [1.0, 100.0]]))
+    assert torch.isfinite(z).all() and z[:, 0].abs().max() < 1e-3
+    assert z[:, 1].tolist() == [-5.0, 5.0]
+
+
+def test_the_missing_next_states_warning_is_logged_once(caplog):
+    from rllib_asor.asor import update
+    from rllib_asor.asor.config import AsorConfig
+
+    update._warn_once.__defaults__[0].clear()
+    cfg = AsorConfig(preset="paper", mode="srpo", shaping="potential", disc_hiddens=[4])
+    state = update.AsorState(cfg, 2)
+    batch = update.AsorBatch(torch.randn(4, 2), torch.ones(4), torch.arange(4.0), gamma=0.9)
+    with caplog.at_level("WARNING", logger="rllib_asor.asor.update"):
+        for _ in range(2):
+            result = update.asor_update(cfg, state, None, batch, np.random.default_rng(0))
+    assert [r.getMessage().count("no next states") for r in caplog.records] == [1]
+    assert result.metrics["potential"] == 0.0  # the direct form instead

@@ -103,6 +103,7 @@ def test_per_dynamics_count_is_minus_the_largest_error_over_the_dynamics_seen():
     # the training loss: each state's error under its own dynamics' predictor
     ids = torch.tensor([0, 1, 2, 3, 4, 5, 6, 7])
     expected = torch.tensor([0.01, 0.04, 0.09, 0.16] * 2)
+    assert rnd.prediction_error(x, ids).shape == (8,)
     assert torch.allclose(rnd.prediction_error(x, ids), expected, atol=1e-6)
     assert proxy.loss(ProxyInputs(x, dynamics_ids=ids)).item() == pytest.approx(0.075, abs=1e-6)
     assert rnd.errors(x).shape == (4, 8)
