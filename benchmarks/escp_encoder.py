@@ -51,6 +51,7 @@ def train(args: argparse.Namespace) -> Any:
     while steps < args.steps:
         steps = int(algo.train()["num_env_steps_sampled_lifetime"])
         print(f"trained {steps} steps in {time.time() - t0:.0f}s", flush=True)
+    algo.save_to_path(str(Path(args.out).resolve() / "checkpoint"))  # --checkpoint reuses it
     return algo
 
 
@@ -102,7 +103,10 @@ def _one_task_rollout(module: Any, values: dict, kw: dict, seed: int) -> np.ndar
         while not done:
             win = np.roll(win, -1, axis=0)
             win[-1] = np.concatenate([obs, last])
-            batch = {Columns.OBS: torch.as_tensor(obs)[None], WINDOW: torch.as_tensor(win)[None]}
+            batch = {
+                Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None],
+                WINDOW: torch.as_tensor(win)[None],
+            }
             zs.append(module.context(batch[WINDOW])[0].numpy())
             logits = module.forward_inference(batch)[Columns.ACTION_DIST_INPUTS]
             a = torch.tanh(logits.chunk(2, dim=-1)[0])[0].numpy()
@@ -175,7 +179,10 @@ def _switching_rollout(module, values: list[dict], kw: dict, seed: int):
             seq.append((t // 100) % 2 if t > 0 else 0)
             if t > 0 and t % 100 == 0:
                 inner.set_dynamics(values[(t // 100) % 2])
-            batch = {Columns.OBS: torch.as_tensor(obs)[None], WINDOW: torch.as_tensor(win)[None]}
+            batch = {
+                Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None],
+                WINDOW: torch.as_tensor(win)[None],
+            }
             logits = module.forward_inference(batch)[Columns.ACTION_DIST_INPUTS]
             a = torch.tanh(logits.chunk(2, dim=-1)[0])[0].numpy()
             obs, _, term, trunc, _ = env.step(low + (a + 1) * (high - low) / 2)
