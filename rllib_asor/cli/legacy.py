@@ -85,6 +85,13 @@ def mean_std_filter_connector(env: Any = None, spaces: Any = None, device: Any =
     return MeanStdFilter()
 
 
+def flatten_observations_connector(env: Any = None, spaces: Any = None, device: Any = None) -> Any:
+    """env_to_module connector factory: RLlib's `FlattenObservations` (one-hot for Discrete)."""
+    from ray.rllib.connectors.env_to_module import FlattenObservations
+
+    return FlattenObservations()
+
+
 def translate_config(
     config: dict[str, Any], source: str, prefix: str = ""
 ) -> tuple[dict[str, Any], list[str]]:

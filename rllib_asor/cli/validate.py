@@ -139,13 +139,40 @@ def validate_env(exp: Experiment) -> None:
         for choice in points:
             env_config = grid.with_candidates(tree, choice)
             try:
-                env_names.build_env(ref, env_config).close()
+                env = env_names.build_env(ref, env_config)
+                space = env.observation_space
+                env.close()
             except Exception as e:
                 raise UsageError(
                     f"{exp.env} cannot be built with {env_config!r}: {one_line(e)}",
                     source=exp.source,
                     key=f"{exp.name}.config.env_config",
                 ) from None
+        _flatten_for_the_default_module(exp, space)
+
+
+def _flatten_for_the_default_module(exp: Experiment, space: Any) -> None:
+    """RLlib's default RLModules read Box observations only: for a Discrete, MultiDiscrete,
+    Dict or Tuple space (and no module or connector of the file's own) add RLlib's
+    `FlattenObservations` (one-hot for discrete parts), as RLlib's own examples do."""
+    import gymnasium as gym
+
+    from rllib_asor.cli import legacy
+    from rllib_asor.registry.families import family_of
+
+    family = family_of(exp.env)
+    if (
+        isinstance(space, gym.spaces.Box)
+        or not isinstance(space, gym.spaces.Space)
+        or {"rl_module", "env_to_module_connector"} & set(exp.config)
+        or family is not None and family.default_module is not None
+    ):
+        return
+    exp.config["env_to_module_connector"] = legacy.flatten_observations_connector
+    exp.warnings.append(
+        f"{exp.source}: observation space {space}: added RLlib's FlattenObservations connector "
+        "(one-hot for discrete parts): the default RLModule reads Box observations only"
+    )
 
 
 def validate(exp: Experiment) -> Any:
@@ -170,4 +197,30 @@ def validate(exp: Experiment) -> Any:
             except Exception as e:
                 raise UsageError(one_line(e), source=exp.source, key=f"{exp.name}.config") from None
         cfg = cfg or candidate
+    _check_env_runner(exp, cfg)
     return cfg
+
+
+def _check_env_runner(exp: Experiment, cfg: Any) -> None:
+    """Build one env runner here, as each remote one will be built (env, connectors, RLModule),
+    so that what would kill them fails now, in one line, and not as RLlib's IndexError later."""
+    if cfg.input_ != "sampler":
+        return  # offline data: no env runners sample
+    from ray.rllib.env.multi_agent_env_runner import MultiAgentEnvRunner
+    from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
+
+    from rllib_asor.registry import env_names
+
+    default = MultiAgentEnvRunner if cfg.is_multi_agent else SingleAgentEnvRunner
+    local = cfg.copy(copy_frozen=False).env_runners(num_envs_per_env_runner=1)
+    with quiet():
+        try:
+            env_names.register_env(exp.env)
+            runner = (cfg.env_runner_cls or default)(config=local)
+        except Exception as e:
+            raise UsageError(
+                f"an env runner cannot be built for {exp.env}: {one_line(e)}",
+                source=exp.source,
+                key=f"{exp.name}.config",
+            ) from None
+        runner.stop()
