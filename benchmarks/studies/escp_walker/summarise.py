@@ -2,9 +2,9 @@
 their 95% BCa intervals (scipy, via `rllib_asor.report.paired.paired_difference`), and the
 verdict of the rule fixed in docs/results.md ("ESCP+ASOR on Walker2d: the study").
 
-    .venv/bin/python benchmarks/studies/escp_walker/summarise.py
+    .venv/bin/python benchmarks/studies/escp_walker/summarise.py [STUDY_DIR]
 
-Writes table.md and summary.json beside this file.
+Reads STUDY_DIR/runs/*.json (default: this folder) and writes table.md and summary.json there.
 """
 
 from __future__ import annotations
@@ -117,9 +117,10 @@ def table(res: dict[str, Any]) -> str:
 
 
 def main() -> None:
-    res = summarise(HERE / "runs")
-    (HERE / "summary.json").write_text(json.dumps(res, indent=1))
-    (HERE / "table.md").write_text(table(res))
+    out = Path(sys.argv[1]) if len(sys.argv) > 1 else HERE  # the study folder (default: here)
+    res = summarise(out / "runs")
+    (out / "summary.json").write_text(json.dumps(res, indent=1))
+    (out / "table.md").write_text(table(res))
     print(table(res))
 
 
