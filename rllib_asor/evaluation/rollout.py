@@ -26,7 +26,18 @@ def deterministic_action(module: Any, obs: np.ndarray) -> np.ndarray:
             {Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None]}
         )
         dist = module.get_inference_action_dist_cls().from_logits(out[Columns.ACTION_DIST_INPUTS])
-        return dist.to_deterministic().sample()[0].numpy()
+        return deterministic_sample(dist)[0].numpy()
+
+
+def deterministic_sample(dist: Any) -> Any:
+    """The distribution's mode as an action. For RLlib's squashed Gaussian (SAC, CQL) that is
+    the squashed mean tanh(μ): RLlib 2.60's `TorchSquashedGaussian.to_deterministic()` returns μ
+    *before* the tanh (the env runner then clips it), an action the policy never samples."""
+    from ray.rllib.core.distribution.torch.torch_distribution import TorchSquashedGaussian
+
+    if isinstance(dist, TorchSquashedGaussian):
+        return dist._squash(dist.loc)
+    return dist.to_deterministic().sample()
 
 
 def unsquash(low: np.ndarray, high: np.ndarray) -> Transform:

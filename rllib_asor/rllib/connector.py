@@ -10,17 +10,23 @@ V(s) from the policy's critic, the episode chunks), runs `rllib_asor.asor.update
 (the algorithm's steps, in order), adds its λ·b(s) to the rewards — b from the discriminator
 *before* this update's discriminator step — and writes the discriminator's and the proxy's
 own batches, so the Learner trains them in the same update.
+
+Several Learners (DDP): every Learner runs the same ASOR update on the rows of all Learners
+(`gather_batches`), so ASOR's state stays identical on all ranks; each keeps the bonus of its
+own rows and an equal share of the aux batches (docs/algorithm.md, "Many Learners").
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import torch
+import torch.distributed as dist
 import tree
 from ray.rllib.connectors.connector_v2 import ConnectorV2
 from ray.rllib.connectors.learner import GeneralAdvantageEstimation
@@ -31,12 +37,6 @@ from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.encoding import flatten, select, select_space
 from rllib_asor.asor.proxy import ProxyInputs
 from rllib_asor.asor.update import AsorBatch, Chunk, asor_update, concat_batches
-from rllib_asor.rllib.distributed import (
-    even_share,
-    even_share_inputs,
-    gather_batches,
-    rank_and_size,
-)
 from rllib_asor.rllib.modules import DYNAMICS_ID, LABEL, proxy_batch
 
 ValueFn = Callable[[Any, dict[str, Any]], torch.Tensor]
@@ -188,7 +188,7 @@ class AsorRewardConnector(ConnectorV2):
                 result.disc_features,
                 result.disc_labels,
             )
-        else:  # the same update on every Learner, on all their rows (distributed.py)
+        else:  # the same update on every Learner, on all their rows (see `gather_batches`)
             device = next(state.parameters()).device
             shards = gather_batches(None if built is None else built[0], device)
             present = [b for b in shards if b is not None]
@@ -318,3 +318,47 @@ class AsorRewardConnector(ConnectorV2):
         if row != valid.numel() or start != int(valid.sum()):
             return None
         return chunks
+
+
+# ------------------------------------------------------------------ several Learners (DDP)
+def rank_and_size() -> tuple[int, int]:
+    """(rank, world size) of the Learners' process group; (0, 1) when there is none."""
+    if dist.is_available() and dist.is_initialized():
+        return dist.get_rank(), dist.get_world_size()
+    return 0, 1
+
+
+def _moved(value: Any, device: torch.device | str) -> Any:
+    if isinstance(value, torch.Tensor):
+        return value.to(device)
+    if isinstance(value, AsorBatch | ProxyInputs):
+        return dataclasses.replace(
+            value,
+            **{f.name: _moved(getattr(value, f.name), device) for f in dataclasses.fields(value)},
+        )
+    return value
+
+
+def gather_batches(batch: AsorBatch | None, device: torch.device | str) -> list[AsorBatch | None]:
+    """Every Learner's batch (None where a Learner has none), in rank order, on `device`.
+
+    A collective: every Learner must call it the same number of times.
+    """
+    out: list[Any] = [None] * dist.get_world_size()
+    dist.all_gather_object(out, None if batch is None else _moved(batch, "cpu"))
+    return [None if b is None else _moved(b, device) for b in out]
+
+
+def even_share(rows: torch.Tensor | None, rank: int, size: int) -> torch.Tensor | None:
+    """This rank's block of `rows`: ⌊N / size⌋ rows each (the remainder is left out)."""
+    if rows is None:
+        return None
+    k = rows.shape[0] // size
+    return rows[rank * k : (rank + 1) * k]
+
+
+def even_share_inputs(x: ProxyInputs, rank: int, size: int) -> ProxyInputs:
+    """`even_share` of every field of a proxy's inputs."""
+    return ProxyInputs(
+        *(even_share(getattr(x, f.name), rank, size) for f in dataclasses.fields(ProxyInputs))
+    )

@@ -40,6 +40,7 @@ from rllib_asor.algorithms.ppo.lean import LeanPPOMixin
 from rllib_asor.algorithms.sac.learner import FastSACLearnerMixin
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
 from rllib_asor.asor.config import AsorConfig
+from rllib_asor.evaluation.rollout import deterministic_sample
 from rllib_asor.rllib.connector import (
     AddDynamicsIdsToBatch,
     AsorRewardConnector,
@@ -254,14 +255,15 @@ class AsorPPOTorchLearner(AsorLearnerMixin, LeanPPOMixin, PPOTorchLearner):
 def soft_q_state_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
     """V(s) for SAC/CQL modules: min over the twin critics of Q(s, π(s)).
 
-    Continuous actions: π's deterministic action; discrete: the expectation under π.
+    Continuous actions: π's deterministic action, the squashed mean; discrete: the expectation
+    under π.
     """
     obs = {Columns.OBS: batch[Columns.OBS]}
     logits = module.pi(module.pi_encoder(obs)[ENCODER_OUT])
     if isinstance(module.action_space, gym.spaces.Discrete):
         q_all = module.compute_q_values(obs, squeeze=False)
         return (torch.softmax(logits, dim=-1) * q_all).sum(-1)
-    action = module.get_train_action_dist_cls().from_logits(logits).to_deterministic().sample()
+    action = deterministic_sample(module.get_train_action_dist_cls().from_logits(logits))
     return module.compute_q_values({**obs, Columns.ACTIONS: action})
 
 

@@ -11,6 +11,7 @@ import pytest
 import torch
 from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.core.columns import Columns
+from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
 import rllib_asor
@@ -20,6 +21,7 @@ from rllib_asor.algorithms.sac.fast import (
     STEPS_PER_CALL,
     ConcatQEncoder,
     FastSACTorchRLModule,
+    SquashedGaussian,
     fast_off_policy,
 )
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY, FlatReplayBuffer, FlatTransitions
@@ -160,6 +162,29 @@ def test_concat_critic_is_one_mlp_on_obs_and_action():
         {Columns.OBS: torch.zeros(5, 3), Columns.ACTIONS: torch.zeros(5, 1)}
     )
     assert q.shape == (5,)
+
+
+def test_greedy_action_and_v_of_s_use_the_squashed_mean():
+    """RLlib 2.60's squashed Gaussian returns μ before the tanh as its deterministic action;
+    ours (and ASOR's V(s)) use tanh(μ), the mode of what the policy samples."""
+    from ray.rllib.core.distribution.torch.torch_distribution import TorchSquashedGaussian
+
+    from rllib_asor.evaluation.rollout import deterministic_sample
+    from rllib_asor.rllib.learners import soft_q_state_values
+
+    logits = torch.tensor([[3.0, -0.5, 0.1, 0.2]])
+    assert not torch.allclose(  # the upstream behaviour this works around
+        TorchSquashedGaussian.from_logits(logits).to_deterministic().sample(),
+        torch.tanh(logits[:, :2]),
+    )
+    for cls in (SquashedGaussian, TorchSquashedGaussian):
+        assert torch.allclose(deterministic_sample(cls.from_logits(logits)), torch.tanh(logits[:, :2]))
+    module = fast_off_policy(_sac()).get_rl_module_spec(env=gym.make("Pendulum-v1")).build()
+    assert module.get_inference_action_dist_cls() is SquashedGaussian
+    obs = torch.randn(6, 3)
+    mu = module.pi(module.pi_encoder({Columns.OBS: obs})[ENCODER_OUT])[:, :1]
+    expected = module.compute_q_values({Columns.OBS: obs, Columns.ACTIONS: torch.tanh(mu)})
+    assert torch.allclose(soft_q_state_values(module, {Columns.OBS: obs}), expected)
 
 
 def test_fast_sac_trains_one_gradient_step_per_env_step_and_restores(ray_session, tmp_path):

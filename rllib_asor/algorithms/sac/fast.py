@@ -47,6 +47,10 @@ from ray.rllib.algorithms.sac.sac_catalog import SACCatalog
 from ray.rllib.algorithms.sac.torch.default_sac_torch_rl_module import DefaultSACTorchRLModule
 from ray.rllib.callbacks.callbacks import RLlibCallback
 from ray.rllib.core.columns import Columns
+from ray.rllib.core.distribution.torch.torch_distribution import (
+    TorchDeterministic,
+    TorchSquashedGaussian,
+)
 from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.core.models.configs import MLPEncoderConfig
 from ray.rllib.core.models.torch.encoder import TorchMLPEncoder
@@ -54,6 +58,7 @@ from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
+from rllib_asor.evaluation.rollout import deterministic_sample
 
 logger = logging.getLogger(__name__)
 
@@ -105,10 +110,24 @@ class ConcatQEncoder(TorchMLPEncoder):
         return {ENCODER_OUT: self.net(x)}
 
 
+class SquashedGaussian(TorchSquashedGaussian):
+    """RLlib's squashed Gaussian whose deterministic action is the squashed mean tanh(μ), the
+    mode of what it samples (RLlib 2.60 returns μ before the tanh: greedy evaluation and V(s)
+    then used actions the policy never takes)."""
+
+    def to_deterministic(self) -> TorchDeterministic:
+        return TorchDeterministic(loc=deterministic_sample(self))
+
+
 class FastSACCatalog(SACCatalog):
-    """`SACCatalog` whose continuous-action Q networks are concat MLPs (`ConcatQEncoder`).
+    """`SACCatalog` whose continuous-action Q networks are concat MLPs (`ConcatQEncoder`) and
+    whose squashed Gaussian's deterministic action is tanh(μ) (`SquashedGaussian`).
 
     Falls back to RLlib's multi-stream Q encoder for non-flat (image, dict) observations."""
+
+    def get_action_dist_cls(self, framework: str) -> Any:
+        cls = super().get_action_dist_cls(framework)
+        return SquashedGaussian if cls is TorchSquashedGaussian else cls
 
     def _build_qf_encoder_continuous(self, framework: str) -> Any:
         obs_space, enc = self.observation_space, self._encoder_config
