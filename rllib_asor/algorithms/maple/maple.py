@@ -277,12 +277,16 @@ class MAPLE(Algorithm):
             import gymnasium as gym
 
             import rllib_asor.envs  # noqa: F401  (registers our env ids)
+            from rllib_asor.algorithms.maple.module import MapleTorchRLModule
 
             env = gym.make(self._env_id, **dict(self.config.env_config or {}))
-            spec = self.config.get_rl_module_spec()
-            spec.observation_space, spec.action_space = env.observation_space, env.action_space
+            self._driver_module = RLModuleSpec(
+                module_class=MapleTorchRLModule,
+                observation_space=env.observation_space,
+                action_space=env.action_space,
+                model_config=self.config.model_config,
+            ).build()
             env.close()
-            self._driver_module = spec.build()
         self._driver_module.set_state(
             self.learner_group.get_weights(module_ids=[DEFAULT_MODULE_ID])[DEFAULT_MODULE_ID]
         )
