@@ -210,8 +210,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument(
         "--ensemble-max-epochs",
         type=int,
-        default=200,
-        help="cap on ensemble epochs (the port: until 5 epochs without improvement)",
+        default=100,
+        help="cap on ensemble epochs (the port: until 5 epochs without improvement; the "
+        "study's budget: 100, docs/results.md)",
     )
     p.add_argument("--ensemble-cache", default=os.path.expanduser("~/.cache/rllib-asor/maple"))
     p.add_argument("--runs", default=str(HERE / "runs"))
