@@ -1,7 +1,8 @@
 """ESCP vs ESCP+ASOR on Walker2d under gravity shift (issue 23, item 4): a resumable runner.
 
 One independent job per (method, seed), each run saved at once to RUNS/<method>-<seed>.json;
-a rerun skips finished runs, so the study resumes where it stopped and several processes (one
+an unfinished run is saved at every evaluation point (RUNS/<method>-<seed>.partial/) and
+continued from there; a rerun skips finished runs, so the study resumes where it stopped and several processes (one
 per core, different --seeds or --methods) can share one folder. The decision rule and budget
 are fixed in docs/results.md ("ESCP+ASOR on Walker2d: the study") before any run.
 
@@ -29,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -99,18 +101,42 @@ def evaluate(algo: Any, seed: int, args: argparse.Namespace, final: bool) -> dic
     return out
 
 
-def run_one(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
-    """Train one (method, seed) for `args.steps` env steps with periodic evaluations."""
+def run_one(method: str, seed: int, args: argparse.Namespace, partial: Path) -> dict[str, Any]:
+    """Train one (method, seed) for `args.steps` env steps with periodic evaluations.
+
+    At every evaluation point the run is saved to `partial` (the algorithm, its replay buffer,
+    the curve), and a run found there is continued from it, so a run that a session's end cuts
+    off resumes at its last evaluation point instead of starting over.
+    """
+    import pickle
+
     config = build_config(method, seed, args)
     algo = config.build_algo()
-    t0, curve, steps, next_eval = time.time(), [], 0, args.eval_every
+    curve: list[dict[str, Any]] = []
+    steps, spent = 0, 0.0
+    offset: int | None = 0
+    state_file = partial / "state.json"
+    if state_file.exists():
+        saved = json.loads(state_file.read_text())
+        algo.restore_from_path(str(partial / "algo"))
+        with open(partial / "replay.pkl", "rb") as f:
+            algo.local_replay_buffer.set_state(pickle.load(f))
+        curve, steps, spent = saved["curve"], saved["steps"], saved["train_wall_s"]
+        offset = None  # known after the first iteration: did the checkpoint keep the counter?
+        print(f"  {method}-{seed}: resumed at {steps} steps", flush=True)
+    next_eval = (steps // args.eval_every + 1) * args.eval_every
+    t0 = time.time() - spent
     try:
         while steps < args.steps:
             result = algo.train()
-            steps = int(result["num_env_steps_sampled_lifetime"])
+            lifetime = int(result["num_env_steps_sampled_lifetime"])
+            if offset is None:
+                offset = steps if lifetime < steps else 0
+            steps = offset + lifetime
             if steps >= next_eval and steps < args.steps:
                 curve.append({"steps": steps, **evaluate(algo, seed, args, final=False)})
                 next_eval += args.eval_every
+                _save_partial(algo, partial, curve, steps, time.time() - t0)
                 print(f"  {method}-{seed} {steps} steps, {time.time() - t0:.0f}s", flush=True)
         wall = time.time() - t0
         final = evaluate(algo, seed, args, final=True)
@@ -126,7 +152,22 @@ def run_one(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
         "final": final,
         "curve": curve,
         "settings": settings(args),
+        "resumed": bool(spent),
     }
+
+
+def _save_partial(algo: Any, partial: Path, curve: list, steps: int, wall: float) -> None:
+    """The run so far: algorithm checkpoint, replay buffer, then (last, atomically) the state."""
+    import pickle
+
+    partial.mkdir(parents=True, exist_ok=True)
+    algo.save_to_path(str(partial / "algo"))
+    with open(partial / "replay.tmp", "wb") as f:
+        pickle.dump(algo.local_replay_buffer.get_state(), f)
+    os.replace(partial / "replay.tmp", partial / "replay.pkl")
+    tmp = partial / "state.tmp"
+    tmp.write_text(json.dumps({"curve": curve, "steps": steps, "train_wall_s": wall}))
+    os.replace(tmp, partial / "state.json")
 
 
 def settings(args: argparse.Namespace) -> dict[str, Any]:
@@ -173,8 +214,10 @@ def main(argv: list[str] | None = None) -> None:
                 start_local_ray()
                 started = True
             print(f"run {method}-{seed} ({os.getpid()})", flush=True)
-            res = run_one(method, seed, args)
+            partial = out / "runs" / f"{method}-{seed}.partial"
+            res = run_one(method, seed, args, partial)
             write_json(path, res)
+            shutil.rmtree(partial, ignore_errors=True)
             print(f"  {method}-{seed} eval {res['eval']} wall {res['wall_s']:.0f}s", flush=True)
 
 
