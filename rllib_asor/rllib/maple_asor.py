@@ -51,25 +51,28 @@ def maple_asor_bonus(
     lam = float(result.metrics.get("lambda", 0.0))
     lead = obs.shape[:-1]
     with torch.no_grad():
-        flat, flat_next = obs.reshape(-1, obs.shape[-1]), next_obs.reshape(-1, obs.shape[-1])
+        mask = valid.reshape(-1).bool()  # the discriminator sees the valid steps only
+        flat = obs.reshape(-1, obs.shape[-1])[mask]
+        flat_next = next_obs.reshape(-1, obs.shape[-1])[mask]
 
         def raw(x: torch.Tensor) -> torch.Tensor:
             return reward_bonus(state.disc(x), cfg.reward_form, cfg.log_omega_min, cfg.logit_clip)
 
-        mask = valid.reshape(-1).bool()
         b = raw(flat)
         if cfg.bonus_norm == "running":
             mean, var = state.bonus_rms.mean.reshape(()), state.bonus_rms.var.reshape(())
         elif cfg.bonus_norm == "batch":
-            mean, var = b[mask].mean(), b[mask].var(unbiased=False)
+            mean, var = b.mean(), b.var(unbiased=False)
         if cfg.bonus_norm != "off":
             b = standardize(b, mean, var, cfg.bonus_clip)
         if cfg.shaping == "potential":
             nb = raw(flat_next)
             if cfg.bonus_norm != "off":
                 nb = standardize(nb, mean, var, cfg.bonus_clip)
-            b = potential_shaping(b, nb, terminateds.reshape(-1), real.gamma)
-        delta = (lam * b * mask).reshape(lead)
+            b = potential_shaping(b, nb, terminateds.reshape(-1)[mask], real.gamma)
+        delta = torch.zeros(mask.shape, dtype=b.dtype, device=b.device)
+        delta[mask] = lam * b
+        delta = delta.reshape(lead)
     if not torch.isfinite(delta).all():
         raise ValueError("ASOR on MAPLE: the reward bonus is NaN/inf")
     return delta, result

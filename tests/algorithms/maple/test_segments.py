@@ -188,3 +188,36 @@ def test_asor_bonus_reaches_every_valid_row_real_and_model() -> None:
     assert result.disc_features.shape == (32, 2)
     assert result.disc_labels.sum().item() == 16
     assert set(values[result.disc_labels > 0.5].tolist()) == set(values.topk(16).values.tolist())
+
+
+def test_robust_asor_bonus_on_valid_rows_ignores_padding() -> None:
+    # the robust default (batch norm, potential form); value-only partition: no proxy needed
+    cfg = AsorConfig.from_dict({"seed": 0, "mode": "srpo"})
+    g = torch.Generator().manual_seed(0)
+    real_obs = torch.randn(32, 2, generator=g)
+    rb = real_batch(
+        real_obs,
+        real_obs + 0.1,
+        torch.ones(32),
+        torch.zeros(32, dtype=torch.bool),
+        real_obs[:, 0],
+        gamma=0.99,
+        timestep=0.0,
+    )
+    obs = torch.randn(4, 3, 2, generator=g)
+    valid = torch.ones(4, 3, dtype=torch.bool)
+    valid[0, 1:] = False
+    term = torch.zeros(4, 3, dtype=torch.bool)
+    out = []
+    for pad in (0.0, 1e3):  # what padding holds must not matter
+        o = obs.clone()
+        o[~valid] = pad
+        torch.manual_seed(0)
+        state = AsorState(cfg, 2)
+        delta, result = maple_asor_bonus(
+            cfg, state, None, rb, o, o + 0.05, term, valid, np.random.default_rng(0)
+        )
+        out.append(delta)
+    torch.testing.assert_close(out[0], out[1])
+    assert (out[0][~valid] == 0).all() and (out[0][valid] != 0).any()
+    assert result.metrics["potential"] == 1.0
