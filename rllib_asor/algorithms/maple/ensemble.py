@@ -115,9 +115,14 @@ class GaussianEnsemble(nn.Module):
         return self._head(self.out(h), obs)
 
     def elites(self, obs: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """`forward` restricted to the elite members: `[E, N, obs_dim + 1]` each."""
-        mu, logstd = self(obs, actions)
-        return mu[self.elite_idx], logstd[self.elite_idx]
+        """`forward` of the elite members only (the others are not computed): `[E, N, obs_dim + 1]`
+        each; obs/actions `[N, ·]`."""
+        idx = self.elite_idx
+        x = torch.cat([(obs - self.obs_mean) / (self.obs_std + 1e-8), actions], dim=-1)
+        h = x.unsqueeze(0).expand(len(idx), -1, -1)
+        for layer in self.hidden_layers:
+            h = F.silu(torch.baddbmm(layer.bias[idx], h, layer.weight[idx]))
+        return self._head(torch.baddbmm(self.out.bias[idx], h, self.out.weight[idx]), obs)
 
 
 def looped_forward(

@@ -13,7 +13,8 @@ and the clip ranges set in `AlgoTrainer.train`):
   data's range widened by 5 % of it on each side, and at least to ±`clip_floor` (the port's
   `np.maximum(obs_max, 100)`; 0 switches the floor off); r clipped to
   [min r − λ·clip, max r] of the data;
-- after a termination the trajectory goes on but its later steps are invalid (`valid` False).
+- after a termination the trajectory's later steps are invalid (`valid` False); the port keeps
+  stepping them, here they are not computed (zeros: nothing reads invalid steps).
 """
 
 from __future__ import annotations
@@ -146,40 +147,58 @@ def _rollout_chunk(
     rng: np.random.Generator,
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     n = len(starts["obs"])
-    obs = torch.as_tensor(starts["obs"], dtype=torch.float32)
-    last = torch.as_tensor(starts["last_actions"], dtype=torch.float32)
-    hidden = torch.as_tensor(starts["policy_hidden"], dtype=torch.float32)
+    obs = torch.as_tensor(starts["obs"], dtype=torch.float32).clone()  # stepped in place
+    last = torch.as_tensor(starts["last_actions"], dtype=torch.float32).clone()
+    hidden = torch.as_tensor(starts["policy_hidden"], dtype=torch.float32).clone()
     lo, hi = torch.as_tensor(limits.obs_lo), torch.as_tensor(limits.obs_hi)
     member = torch.as_tensor(rng.integers(0, len(ensemble.elite_idx), size=n))
-    rows = torch.arange(n)
     alive = np.ones(n, dtype=bool)
+    act_dim = last.shape[1]
     keys = ("obs", "actions", "next_obs", "last_actions", "rewards", "terminateds", "valid")
     steps: dict[str, list[np.ndarray]] = {k: [] for k in keys}
     us = []
     for _ in range(horizon):
-        act, hidden = policy_step(obs, last, hidden)
-        mu, logstd = ensemble.elites(obs, act)
-        noise = torch.as_tensor(rng.standard_normal(mu.shape[1:]), dtype=torch.float32)
-        sample = mu[member, rows] + logstd[member, rows].exp() * noise
-        next_obs, reward = sample[:, :-1], sample[:, -1]
-        term = terminated_fn(next_obs.numpy())
-        next_obs = torch.maximum(torch.minimum(next_obs, hi), lo)
-        reward = reward.clamp(limits.rew_lo, limits.rew_hi)
-        reward, u = penalized_reward(reward, logstd, penalty_coef, penalty_clip)
-        us.append(u.numpy()[alive])
-        for k, v in (
-            ("obs", obs),
-            ("actions", act),
-            ("next_obs", next_obs),
-            ("last_actions", last),
-            ("rewards", reward),
-        ):
-            steps[k].append(v.numpy().astype(np.float32))
-        steps["terminateds"].append(term.copy())
-        steps["valid"].append(alive.copy())
-        alive &= ~term
-        obs, last = next_obs, act
+        # Only the trajectories still alive are stepped (the port steps them all and masks the
+        # rest as invalid; what invalid steps hold is never read): rows after a termination
+        # stay zero.
+        idx = np.flatnonzero(alive)
+        t_idx = torch.as_tensor(idx)
+        step = {
+            "obs": np.zeros((n, obs.shape[1]), np.float32),
+            "actions": np.zeros((n, act_dim), np.float32),
+            "next_obs": np.zeros((n, obs.shape[1]), np.float32),
+            "last_actions": np.zeros((n, act_dim), np.float32),
+            "rewards": np.zeros(n, np.float32),
+            "terminateds": np.zeros(n, bool),
+            "valid": alive.copy(),
+        }
+        if len(idx):
+            o, a_prev = obs[t_idx], last[t_idx]
+            act, h_new = policy_step(o, a_prev, hidden[t_idx])
+            mu, logstd = ensemble.elites(o, act)
+            noise = torch.as_tensor(rng.standard_normal(mu.shape[1:]), dtype=torch.float32)
+            rows, m = torch.arange(len(idx)), member[t_idx]
+            sample = mu[m, rows] + logstd[m, rows].exp() * noise
+            next_obs, reward = sample[:, :-1], sample[:, -1]
+            term = terminated_fn(next_obs.numpy())
+            next_obs = torch.maximum(torch.minimum(next_obs, hi), lo)
+            reward = reward.clamp(limits.rew_lo, limits.rew_hi)
+            reward, u = penalized_reward(reward, logstd, penalty_coef, penalty_clip)
+            us.append(u.numpy())
+            for k, v in (
+                ("obs", o),
+                ("actions", act),
+                ("next_obs", next_obs),
+                ("last_actions", a_prev),
+                ("rewards", reward),
+            ):
+                step[k][idx] = v.numpy()
+            step["terminateds"][idx] = term
+            obs[t_idx], last[t_idx], hidden[t_idx] = next_obs, act, h_new
+            alive[idx[term]] = False
+        for k in keys:
+            steps[k].append(step[k])
     out = {k: np.stack(v, axis=1) for k, v in steps.items()}
     out["policy_hidden"] = np.asarray(starts["policy_hidden"], dtype=np.float32)
     out["value_hidden"] = np.asarray(starts["value_hidden"], dtype=np.float32)
-    return out, np.concatenate(us)
+    return out, np.concatenate(us) if us else np.zeros(0, np.float32)

@@ -39,6 +39,11 @@ def test_batched_forward_equals_the_per_member_loop() -> None:
     assert mu.shape == (4, 10, 4) and logstd.shape == (4, 10, 4)
     torch.testing.assert_close(mu, mu_l)
     torch.testing.assert_close(logstd, logstd_l)
+    # the elites alone: the same as the full forward's elite members
+    model.elite_idx.copy_(torch.tensor([3, 1]))
+    mu_e, logstd_e = model.elites(obs, act)
+    torch.testing.assert_close(mu_e, mu[[3, 1]])
+    torch.testing.assert_close(logstd_e, logstd[[3, 1]])
     # each member its own rows ([K, N, ·] inputs)
     obs_k, act_k = torch.randn(4, 10, 3), torch.randn(4, 10, 2)
     mu_k, _ = model(obs_k, act_k)

@@ -91,6 +91,7 @@ def test_rollouts_stop_at_termination_and_stay_in_the_clip_range() -> None:
     # height 1.0 → 0.88 → 0.76 → 0.64: the third step ends the episode (height must stay > 0.7)
     assert seg["valid"].tolist() == [[True] * 3 + [False] * 3] * 4
     assert seg["terminateds"][:, 2].all() and not seg["terminateds"][:, :2].any()
+    assert (seg["obs"][:, 3:] == 0).all()  # steps after the end are not computed
     np.testing.assert_allclose(seg["obs"][0, :3, 0], [1.0, 0.88, 0.76], atol=1e-4)
     np.testing.assert_allclose(seg["next_obs"][:, :, :], seg["next_obs"].clip(-5, 5))
     assert stats.valid_fraction == pytest.approx(0.5)
