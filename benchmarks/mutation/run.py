@@ -114,6 +114,7 @@ def run_mutmut(dest: Path, children: int, names: list[str]) -> int:
 def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> dict:
     counts = {"killed": 0, "survived": 0, "no_tests": 0, "skipped": 0, "other": 0, "not_checked": 0}
     survivors: list[str] = []
+    unchecked: list[str] = []
     names: set[str] = set()
     for meta in sorted((dest / "mutants").rglob("*.py.meta")):
         rel = meta.relative_to(dest / "mutants").as_posix()[: -len(".meta")]
@@ -129,6 +130,7 @@ def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> d
                 counts["skipped"] += 1
             elif code is None:  # the run was stopped before this mutant
                 counts["not_checked"] += 1
+                unchecked.append(key)
             elif code in SURVIVED or code in NO_TESTS:
                 counts["survived" if code in SURVIVED else "no_tests"] += 1
                 survivors.append(key)
@@ -148,6 +150,7 @@ def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> d
         "kill_ratio": round(ratio, 4),
         "threshold": pkg.get("threshold", 0.8),
         "open_survivors": open_survivors,
+        "not_checked_mutants": unchecked,
         "stale_equivalents": sorted(
             p for p in equivalent if not any(fnmatch.fnmatch(s, p) for s in survivors)
         ),
@@ -183,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
             names = list(pkg.get("mutants", []))
             if args.rerun_open and (dest / "mutants").exists():
                 last = summarise(name, dest, pkg, equivalent.get(name, {}))
-                names = last["open_survivors"] or names
+                names = last["open_survivors"] + last["not_checked_mutants"] or names
             rc = run_mutmut(dest, args.children, names)
             if rc != 0:
                 print(f"mutmut run for {name} exited {rc}", file=sys.stderr)
