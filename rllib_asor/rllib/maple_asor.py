@@ -26,7 +26,8 @@ from rllib_asor.algorithms.maple.losses import state_values
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.proxy import ProxyInputs, VisitationProxy
 from rllib_asor.asor.reward import potential_shaping, reward_bonus, standardize
-from rllib_asor.asor.update import AsorBatch, AsorResult, AsorState, asor_update
+from rllib_asor.asor.update import AsorBatch, AsorResult, AsorState, asor_update, concat_batches
+from rllib_asor.rllib.connector import even_share, even_share_inputs, gather_batches, rank_and_size
 from rllib_asor.rllib.learners import AsorLearnerMixin
 from rllib_asor.rllib.modules import LABEL, proxy_batch
 
@@ -144,6 +145,9 @@ class AsorMapleTorchLearner(AsorLearnerMixin, MapleTorchLearner):
             )
             state = self.module[ids.disc].unwrapped().state
             proxy = self.module[ids.proxy].unwrapped().proxy if ids.proxy is not None else None
+            rank, size = rank_and_size()
+            if size > 1:  # the same ASOR update on every Learner (connector.gather_batches)
+                real = concat_batches([b for b in gather_batches(real, pb["obs"].device) if b])
             delta, result = maple_asor_bonus(
                 self.asor,
                 state,
@@ -156,9 +160,12 @@ class AsorMapleTorchLearner(AsorLearnerMixin, MapleTorchLearner):
                 self._maple_asor_rng,
             )
             pb[BONUS] = delta
-            batch[ids.disc] = {Columns.OBS: result.disc_features, LABEL: result.disc_labels}
+            batch[ids.disc] = {
+                Columns.OBS: even_share(result.disc_features, rank, size),
+                LABEL: even_share(result.disc_labels, rank, size),
+            }
             if ids.proxy is not None:
-                batch[ids.proxy] = proxy_batch(real.proxy_inputs)
+                batch[ids.proxy] = proxy_batch(even_share_inputs(real.proxy_inputs, rank, size))
             if result.metrics:
                 self.metrics.log_dict(result.metrics, key=ids.disc, window=1)
             self._asor_offline_rows += int(real.features.shape[0])

@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 import torch
+import torch.distributed as dist
 from ray.rllib.core.learner.torch.torch_learner import TorchLearner
 
 from rllib_asor.algorithms.common.learner_speed import SameMathSpeedMixin
@@ -77,8 +78,12 @@ class MapleTorchLearner(SameMathSpeedMixin, TorchLearner):
         return super()._update(batch, **kwargs)
 
     def compute_gradients(self, loss_per_module: dict[str, Any], **kwargs: Any) -> dict[Any, Any]:
+        """Each optimizer's gradient of its own loss (`torch.autograd.grad`). That bypasses DDP's
+        backward hooks, so with several Learners the gradients are averaged here, in the same
+        (sorted) order on every rank."""
         grads: dict[Any, Any] = {}
-        for module_id, loss in loss_per_module.items():
+        for module_id in sorted(loss_per_module):
+            loss = loss_per_module[module_id]
             named = dict(self.get_optimizers_for_module(module_id))
             parts = self._maple_losses.get(module_id)
             for optim_name, optim in named.items():
@@ -88,6 +93,10 @@ class MapleTorchLearner(SameMathSpeedMixin, TorchLearner):
                 gs = torch.autograd.grad(part, params, retain_graph=True, allow_unused=True)
                 for ref, p, g in zip(refs, params, gs, strict=True):
                     grads[ref] = torch.zeros_like(p) if g is None else g
+        if dist.is_available() and dist.is_initialized() and dist.get_world_size() > 1:
+            for g in grads.values():  # dict order: the same on every rank
+                dist.all_reduce(g)
+                g /= dist.get_world_size()
         return grads
 
     def apply_gradients(self, gradients_dict: dict[Any, Any]) -> None:

@@ -189,3 +189,44 @@ def test_bad_settings_name_the_key_the_value_and_what_is_allowed(settings, match
 def test_a_config_without_data_says_make_datasets():
     with pytest.raises(ValueError, match="make datasets"):
         rllib_asor.MapleConfig().environment(ENV).validate()
+
+
+def test_maple_asor_on_two_learners_keeps_one_state(parts, tmp_path):
+    """MAPLE's own gradients (torch.autograd.grad, outside DDP's hooks) are averaged across
+    Learners, and ASOR's update runs on every Learner's real rows: policy, critics,
+    discriminator and statistics are the same on both ranks, also after a restore."""
+    from tests.cluster.test_many_learners import _assert_same, _per_rank
+
+    def everything(learner):
+        return {
+            f"{mid}/{k}": v.detach().cpu().numpy().copy()
+            for mid, m in learner.module._rl_modules.items()
+            for k, v in m.unwrapped().state_dict().items()
+        }
+
+    def per_rank(algo):
+        calls = algo.learner_group.foreach_learner(everything)
+        return [c.get() for c in sorted(calls, key=lambda c: c.actor_id)]
+
+    def build():
+        config = _config(parts, tmp_path).learners(num_learners=2, num_cpus_per_learner=0.5)
+        return rllib_asor.with_asor(config, seed=0).build_algo()
+
+    algo = build()
+    try:
+        for _ in range(2):
+            result = algo.train()
+        assert np.isfinite(result["asor"]["disc_loss"])
+        states = per_rank(algo)
+        _assert_same(*states, "MAPLE+ASOR ranks differ")
+        asor_before = _per_rank(algo)
+        checkpoint = algo.save_to_path(str(tmp_path / "ckpt"))
+    finally:
+        algo.stop()
+    restored = build()
+    try:
+        restored.restore_from_path(checkpoint)
+        for before, after in zip(asor_before, _per_rank(restored), strict=True):
+            _assert_same(before, after, "MAPLE+ASOR after restore")
+    finally:
+        restored.stop()
