@@ -53,16 +53,20 @@ def validate_asor(exp: Experiment) -> None:
             source=exp.source,
             key=f"{exp.name}.run",
         )
+    _each_candidate(exp.asor, AsorConfig.from_dict, exp, f"{exp.name}.config.asor")
+
+
+def _each_candidate(block: dict[str, Any], check: Any, exp: Experiment, key: str) -> None:
+    """`check(settings)` for the block's first candidate and each grid value; one line naming
+    `key` on the first ValueError/TypeError."""
     points: list[dict[grid.Path, Any]] = [{}]
-    for path, candidates in grid.find_grids(exp.asor):
+    for path, candidates in grid.find_grids(block):
         points += [{path: c} for c in candidates]
     for choice in points:
         try:
-            AsorConfig.from_dict(grid.with_candidates(exp.asor, choice))
+            check(grid.with_candidates(block, choice))
         except (ValueError, TypeError) as e:
-            raise UsageError(
-                one_line(e), source=exp.source, key=f"{exp.name}.config.asor"
-            ) from None
+            raise UsageError(one_line(e), source=exp.source, key=key) from None
 
 
 def validate_maple(exp: Experiment) -> None:
@@ -78,14 +82,7 @@ def validate_maple(exp: Experiment) -> None:
         )
     from rllib_asor.algorithms.maple.settings import MapleSettings
 
-    points: list[dict[grid.Path, Any]] = [{}]
-    for path, candidates in grid.find_grids(block):
-        points += [{path: c} for c in candidates]
-    for choice in points:
-        try:
-            MapleSettings.from_dict(grid.with_candidates(block, choice))
-        except (ValueError, TypeError) as e:
-            raise UsageError(one_line(e), source=exp.source, key=key) from None
+    _each_candidate(block, MapleSettings.from_dict, exp, key)
 
 
 def validate_escp(exp: Experiment) -> None:
@@ -103,14 +100,7 @@ def validate_escp(exp: Experiment) -> None:
         )
     from rllib_asor.algorithms.escp.settings import EscpSettings
 
-    points: list[dict[grid.Path, Any]] = [{}]
-    for path, candidates in grid.find_grids(block):
-        points += [{path: c} for c in candidates]
-    for choice in points:
-        try:
-            EscpSettings.from_dict(grid.with_candidates(block, choice))
-        except (ValueError, TypeError) as e:
-            raise UsageError(one_line(e), source=exp.source, key=key) from None
+    _each_candidate(block, EscpSettings.from_dict, exp, key)
 
 
 def validate_env(exp: Experiment) -> None:
