@@ -106,6 +106,8 @@ def test_sac_network_blocks_keep_their_layers_and_say_what_they_drop():
         f"{SRC}: legacy key 'policy_model' translated to 'model_config' (fcnet_hiddens, "
         "fcnet_activation)"
     ]
+    _, warnings = _translate({"Q_model": {"free_log_std": True, "custom_model": "x"}})
+    assert warnings[0].endswith("(custom_model, free_log_std dropped: no new-stack meaning)")
     _, warnings = _translate({"Q_model": {"fcnet_hiddens": [8]}, "policy_model": {"fcnet_hiddens": [4]}})
     assert any("SAC uses one model_config for policy and critics; kept '[8]'" in w for w in warnings)
     _refused({"Q_model": "fcnet"}, "Q_model", "allowed a mapping of model settings")
@@ -145,3 +147,11 @@ def test_moved_class_paths_inside_lists_and_mappings_warn_naming_the_file():
     out, warnings = _translate({"a": {"b": [f"{old}:X"]}})
     assert out == {"a": {"b": [f"{new}:X"]}}
     assert warnings == [f"{SRC}: class path '{old}:X' moved to '{new}:X'"]
+
+
+def test_an_empty_or_null_model_config_block_adds_nothing():
+    assert _translate({"model_config": None, "lr": 0.1}) == ({"lr": 0.1}, [])
+    assert _translate({"model_config": {}}) == ({}, [])
+    assert _translate({"model_config": {"fcnet_hiddens": [4]}}) == (
+        {"model_config": {"fcnet_hiddens": [4]}}, []
+    )
