@@ -11,7 +11,7 @@ import pytest
 
 from game_env.constants import FEET
 from game_env.env import ObstacleRaceEnv
-from game_env.sim import DECAY
+from game_env.sim import DECAY, RaceSim
 from game_env.spaces import REWARD_TERMS
 from tests.game_env.helpers import IDLE, place, sim_at
 
@@ -135,3 +135,26 @@ def test_the_env_reward_is_the_sum_and_the_time_limit_truncates():
         assert reward == pytest.approx(sum(info["reward_terms"].values()))
         assert not terminated and truncated == (t == 2)
     env.close()
+
+
+def test_a_fallen_racer_respawns_still_at_its_own_spot_by_the_last_archive_point():
+    sim = RaceSim(2)
+    sim.load(0, 0)
+    sim.reset()
+    r = sim.racers[1]
+    sim.data.qpos[sim.qpos_i[1]] = [1.0, 1.0, sim.fall_z - 1.0]  # racer 1 below the fall line
+    r.knock_until = r.dash_until = 1e9  # knocked back and dashing when it fell
+    r.launched = r.in_jump = True
+    sim.last_pos = sim.data.qpos[sim.qpos_flat].tolist()
+    _, terms, _, err = sim.step(np.repeat(IDLE, 2, axis=0))
+    assert err is None and terms[1]["fall_or_wall"] == -1.0 and terms[0]["fall_or_wall"] == 0.0
+    ax, ay, az = sim.arch_pos[r.last_archive]  # the start: no archive point reached yet
+    ox, oy = sim.offsets[1]
+    assert (ox, oy) != (0.0, 0.0)
+    spot = (ax + 0.5 * ox, ay + 0.5 * oy, az + 0.05)
+    assert sim.pos[1].tolist() == pytest.approx(spot, abs=1e-9)
+    assert sim.vel[1].tolist() == [0.0, 0.0, 0.0]
+    assert (r.knock_until, r.dash_until) == (0.0, 0.0)
+    assert not (r.launched or r.grounded or r.in_jump)
+    assert tuple(r.anchor) == pytest.approx(spot[:2]) and len(r.anchor) == 2
+    assert r.anchor_t == pytest.approx(sim.data.time)
