@@ -152,6 +152,9 @@ def test_every_setting_has_its_doc_and_help_shows_both_defaults():
     assert list(docs) == list(AsorConfig().to_dict())
     assert all(docs.values())
     assert docs["mode"].startswith("asor") or "asor" in docs["mode"]
+    # a docstring over several lines is one line of single spaces
+    assert "λ_I the dual-ascent (integral) term" in docs["lambda_kp"]
+    assert not any("\n" in d or "  " in d for d in docs.values())
     text = settings_help()
     assert text.splitlines()[0] == "Settings (robust default | paper preset where they differ):"
     assert "    lambda_ = 0.05 | paper 0.01\n" in text
