@@ -138,22 +138,22 @@ def test_the_env_reward_is_the_sum_and_the_time_limit_truncates():
 
 
 def test_a_fallen_racer_respawns_still_at_its_own_spot_by_the_last_archive_point():
-    sim = RaceSim(2)
+    sim = RaceSim(5)  # racer 4 starts in the second row: an offset along x and y
     sim.load(0, 0)
     sim.reset()
-    r = sim.racers[1]
-    sim.data.qpos[sim.qpos_i[1]] = [1.0, 1.0, sim.fall_z - 1.0]  # racer 1 below the fall line
+    r = sim.racers[4]
+    sim.data.qpos[sim.qpos_i[4]] = [1.0, 1.0, sim.fall_z - 1.0]  # racer 4 below the fall line
     r.knock_until = r.dash_until = 1e9  # knocked back and dashing when it fell
     r.launched = r.in_jump = True
     sim.last_pos = sim.data.qpos[sim.qpos_flat].tolist()
-    _, terms, _, err = sim.step(np.repeat(IDLE, 2, axis=0))
-    assert err is None and terms[1]["fall_or_wall"] == -1.0 and terms[0]["fall_or_wall"] == 0.0
+    _, terms, _, err = sim.step(np.repeat(IDLE, 5, axis=0))
+    assert err is None and terms[4]["fall_or_wall"] == -1.0 and terms[0]["fall_or_wall"] == 0.0
     ax, ay, az = sim.arch_pos[r.last_archive]  # the start: no archive point reached yet
-    ox, oy = sim.offsets[1]
-    assert (ox, oy) != (0.0, 0.0)
+    ox, oy = sim.offsets[4]
+    assert ox != 0.0 and oy != 0.0
     spot = (ax + 0.5 * ox, ay + 0.5 * oy, az + 0.05)
-    assert sim.pos[1].tolist() == pytest.approx(spot, abs=1e-9)
-    assert sim.vel[1].tolist() == [0.0, 0.0, 0.0]
+    assert sim.pos[4].tolist() == pytest.approx(spot, abs=1e-9)
+    assert sim.vel[4].tolist() == [0.0, 0.0, 0.0]
     assert (r.knock_until, r.dash_until) == (0.0, 0.0)
     assert not (r.launched or r.grounded or r.in_jump)
     assert tuple(r.anchor) == pytest.approx(spot[:2]) and len(r.anchor) == 2
