@@ -106,9 +106,8 @@ def validate_escp(exp: Experiment) -> None:
 def validate_env(exp: Experiment) -> None:
     """The env must resolve (`registry.env_names`: ids, `module:EnvId`, class paths, old gym
     ids) and build with each `env_config` candidate; an old id is replaced by its new one."""
-    import gymnasium as gym
 
-    from rllib_asor.registry import env_names, envs
+    from rllib_asor.registry import env_names
 
     with quiet():
         try:
@@ -117,11 +116,9 @@ def validate_env(exp: Experiment) -> None:
             raise UsageError(one_line(e), source=exp.source, key=f"{exp.name}.env") from None
         if ref.note:
             exp.warnings.append(f"{exp.source}: {ref.note}")
-        plain = ref.module is None and ref.attr is None and ref.spec is None
+        plain = ref.module is None and ref.attr is None and ref.spec is None and not ref.tune
         if plain and ref.env_id != exp.env:
             exp.env = ref.env_id
-        if plain and exp.env not in gym.registry and exp.env not in envs.race_creators():
-            return  # registered with Tune by someone else: built only on the env runners
         tree = exp.config.get("env_config") or {}
         points: list[dict[grid.Path, Any]] = [{}]
         for path, candidates in grid.find_grids(tree):

@@ -49,6 +49,12 @@ class EnvRef:
     spec: Any = None
     note: str | None = None
     """What was translated, for a warning (e.g. an old gym id), else None."""
+    tune: bool = False
+    """Built by a creator someone registered with Tune under `name`."""
+
+
+_REGISTERED: dict[str, EnvRef] = {}
+"""Names `register_env` registered with Tune in this process, and what they resolved to."""
 
 
 def resolve_env(name: str) -> EnvRef:
@@ -57,7 +63,11 @@ def resolve_env(name: str) -> EnvRef:
 
     if not isinstance(name, str) or not name:
         raise ValueError(f"env {name!r} is invalid: allowed an env id or 'package.module:Class'")
+    if name in _REGISTERED:
+        return _REGISTERED[name]
     if envs.env_exists(name):
+        if name not in gym.registry and name not in envs.race_creators():
+            return EnvRef(name, tune=True)  # someone else's Tune creator
         return _known(name, gym.registry.get(name))
     if ":" in name:
         module, _, attr = name.partition(":")
@@ -193,6 +203,12 @@ def build_env(ref: EnvRef, env_config: Any = None) -> Any:
     import gymnasium as gym
 
     config = dict(env_config or {})
+    if ref.tune:
+        from ray.tune.registry import ENV_CREATOR, _global_registry
+
+        return _global_registry.get(ENV_CREATOR, ref.name)(
+            env_config if env_config is not None else config
+        )
     if ref.module is not None:
         importlib.import_module(ref.module)
     if ref.attr is not None:
@@ -225,6 +241,7 @@ def register_env(name: str) -> EnvRef:
     from ray import tune
 
     ref = resolve_env(name)
-    if not envs.in_tune_registry(name):
+    if not ref.tune and not envs.in_tune_registry(name):
         tune.register_env(name, functools.partial(build_env, ref))
+        _REGISTERED[name] = ref
     return ref

@@ -151,20 +151,45 @@ def test_failing_trial_exits_1(tmp_path, write_yaml, cli_ray):
     import gymnasium as gym
     from ray import tune
 
-    def failing_env(env_config):
-        raise RuntimeError("this env always fails to build")
+    class FailsWhenStepped(gym.Env):  # builds fine (validation passes), fails in training
+        observation_space = gym.spaces.Box(-1.0, 1.0, (2,))
+        action_space = gym.spaces.Discrete(2)
 
-    tune.register_env("cli-test/AlwaysFails-v0", failing_env)
-    assert "cli-test/AlwaysFails-v0" not in gym.registry
+        def reset(self, *, seed=None, options=None):
+            return self.observation_space.sample(), {}
+
+        def step(self, action):
+            raise RuntimeError("this env always fails when stepped")
+
+    tune.register_env("cli-test/FailsInTraining-v0", lambda cfg: FailsWhenStepped())
+    assert "cli-test/FailsInTraining-v0" not in gym.registry
     path = write_yaml("""
         fails:
-          env: cli-test/AlwaysFails-v0
+          env: cli-test/FailsInTraining-v0
           run: PPO
           config: {restart_failed_env_runners: false}
     """)
     res = run_cli(["train", "file", path, "--test", "--storage-path", str(tmp_path)])
     assert res.rc == 1
     assert "1 errored" in res.out
+
+
+def test_env_that_cannot_be_built_exits_2_in_one_line_before_ray(tmp_path, write_yaml, cli_ray):
+    from ray import tune
+
+    def failing_env(env_config):
+        raise RuntimeError("this env always fails to build")
+
+    tune.register_env("cli-test/AlwaysFails-v0", failing_env)
+    path = write_yaml("""
+        fails:
+          env: cli-test/AlwaysFails-v0
+          run: PPO
+    """)
+    res = run_cli(["train", "file", path, "--test", "--storage-path", str(tmp_path)])
+    assert res.rc == 2
+    lines = [line for line in res.err.splitlines() if line.strip()]
+    assert len(lines) == 1 and "this env always fails to build" in lines[0], res.err
 
 
 def test_evaluate_damaged_checkpoint_exits_2_naming_the_file(cartpole, tmp_path):

@@ -115,12 +115,15 @@ def test_rl_module_block_selects_a_registered_module_class(write_yaml):
             model_config: {vf_hiddens: [32]}
     """)
     )
-    cfg = experiment.validate(exp)
+    cfg = experiment.build_algo_config(exp)
     assert cfg._rl_module_spec.module_class.__name__ == "RaceNetModule"
     assert cfg.model_config["pi_hiddens"] == [64] and cfg.model_config["vf_hiddens"] == [32]
     assert (
         experiment.param_space(exp, cfg)["_rl_module_spec"].module_class.__name__ == "RaceNetModule"
     )
+    # Validation builds an env runner: the race network on CartPole is refused in one line.
+    with pytest.raises(UsageError, match="env runner cannot be built.*RaceNetModule needs a Dict"):
+        experiment.validate(exp)
 
 
 def test_legacy_custom_model_becomes_rl_module_block(write_yaml):

@@ -136,6 +136,7 @@ def test_dry_run_prints_the_new_stack_yaml_without_ray(tmp_path):
     assert "translated" not in again.stderr and "dropped" not in again.stderr
 
 
+@pytest.mark.slow  # ~1-5 min; the dry-run tests above build the same env runner
 def test_old_sac_file_trains_with_test(tmp_path):
     proc = subprocess.run(
         [RLLIB, "train", "file", str(OLD / "sac-old.yaml"), "--test", "--storage-path",

@@ -92,6 +92,7 @@ def test_own_env_by_plain_id_trains_with_test_and_is_evaluated(user):
     assert "dynamics" in ev.stdout.lower()
 
 
+@pytest.mark.slow  # the class path resolves and builds a runner in the dry-run test
 def test_own_env_class_path_trains_with_test(user):
     root, env = user
     proc = _rllib(["train", "file", str(_yaml(root, "myenv.VarPoleCartPole", asor=False)),
