@@ -15,26 +15,11 @@ from ray.rllib.algorithms.sac.torch.sac_torch_learner import SACTorchLearner
 
 from rllib_asor.algorithms.escp.learner import EscpLearnerMixin
 from rllib_asor.algorithms.escp.module import escp_state_values
-from rllib_asor.algorithms.sac.learner import FastSACLearnerMixin
-from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
-from rllib_asor.rllib.learners import _SoftQAsorMixin, is_aux_module
+from rllib_asor.rllib.learners import FastSoftQAsorMixin
 
 
-class AsorESCPTorchLearner(FastSACLearnerMixin, _SoftQAsorMixin, EscpLearnerMixin, SACTorchLearner):
+class AsorESCPTorchLearner(FastSoftQAsorMixin, EscpLearnerMixin, SACTorchLearner):
     """ESCP's Learner with ASOR's reward augmentation on the fast path's batches."""
 
     def asor_connector_kwargs(self) -> dict[str, Any]:
         return {"value_fn": escp_state_values, "gamma": self.config.gamma}
-
-    def flat_batch_module_ids(self) -> list[str]:
-        return [m for m in self.module.keys() if not is_aux_module(m)]
-
-    def _flat_batch_hook(self, batch: dict[str, Any]) -> dict[str, Any]:
-        self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)
-        return batch
-
-    def aux_rows(self, module_id: str) -> float:
-        """One minibatch per Learner call for the aux modules (as `AsorSACTorchLearner`)."""
-        if getattr(self, "_fast_steps", False) and self.asor.aux_epochs is None:
-            return float(self.config.learner_config_dict[MINIBATCH_KEY])
-        return super().aux_rows(module_id)

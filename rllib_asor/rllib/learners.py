@@ -285,10 +285,9 @@ class _SoftQAsorMixin(AsorLearnerMixin, SortedModuleGradientsMixin):
         return losses
 
 
-class AsorSACTorchLearner(FastSACLearnerMixin, _SoftQAsorMixin, SACTorchLearner):
-    """SAC's torch Learner with ASOR; with `n_step > 1` the bonus is added to the n-step sum
-    once (for s_t), an approximation of Σ γ^k λ·b(s_{t+k}). On the fast path (FlatReplayBuffer)
-    the ASOR piece runs on the batch built from the buffer's columns."""
+class FastSoftQAsorMixin(FastSACLearnerMixin, _SoftQAsorMixin):
+    """ASOR on the fast off-policy path (SAC, ESCP): the ASOR piece runs on the batch built from
+    the flat buffer's columns; the aux modules take one minibatch per Learner call."""
 
     def flat_batch_module_ids(self) -> list[str]:
         return [m for m in self.module.keys() if not is_aux_module(m)]
@@ -304,6 +303,11 @@ class AsorSACTorchLearner(FastSACLearnerMixin, _SoftQAsorMixin, SACTorchLearner)
         if getattr(self, "_fast_steps", False) and self.asor.aux_epochs is None:
             return float(self.config.learner_config_dict[MINIBATCH_KEY])
         return super().aux_rows(module_id)
+
+
+class AsorSACTorchLearner(FastSoftQAsorMixin, SACTorchLearner):
+    """SAC's torch Learner with ASOR; with `n_step > 1` the bonus is added to the n-step sum
+    once (for s_t), an approximation of Σ γ^k λ·b(s_{t+k})."""
 
 
 class AsorCQLTorchLearner(_SoftQAsorMixin, CQLTorchLearner):
