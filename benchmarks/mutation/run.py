@@ -6,7 +6,7 @@
 
 For each package: the working tree (tracked and untracked-but-not-ignored files) is copied to
 build/mutation/<package>/, the package's [tool.mutmut] settings are appended to that copy's
-pyproject.toml, and `mutmut run` is started there under `nice -n 19` (so mutmut's `mutants/`
+pyproject.toml, and `mutmut run` is started there under `nice -n 19` (`--nice`; so mutmut's `mutants/`
 sandbox never appears in the checkout, and a second run reuses the first one's results for
 every function whose source and tests did not change). Then the kill ratio is computed:
 
@@ -102,10 +102,10 @@ def write_config(dest: Path, defaults: dict, pkg: dict) -> None:
         path.write_text(text)
 
 
-def run_mutmut(dest: Path, children: int, names: list[str]) -> int:
+def run_mutmut(dest: Path, children: int, names: list[str], nice: int = 19) -> int:
     mutmut = Path(sys.executable).with_name("mutmut")
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0")
-    cmd = ["nice", "-n", "19", str(mutmut), "run", "--max-children", str(children), *names]
+    cmd = ["nice", "-n", str(nice), str(mutmut), "run", "--max-children", str(children), *names]
     print("+", " ".join(cmd[:8]), f"(+{len(names)} mutant names)" if names else "", f"(in {dest})",
           flush=True)
     return subprocess.run(cmd, cwd=dest, env=env).returncode
@@ -165,6 +165,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--children", type=int, default=2, help="mutants tested at once (2)")
     ap.add_argument("--check", action="store_true", help="exit 1 below a threshold")
     ap.add_argument(
+        "--nice", type=int, default=19, help="niceness of mutmut (19: only idle CPU time)"
+    )
+    ap.add_argument(
         "--rerun-open",
         action="store_true",
         help="test again the survivors and untested mutants of the last run (after new tests)",
@@ -187,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.rerun_open and (dest / "mutants").exists():
                 last = summarise(name, dest, pkg, equivalent.get(name, {}))
                 names = last["open_survivors"] + last["not_checked_mutants"] or names
-            rc = run_mutmut(dest, args.children, names)
+            rc = run_mutmut(dest, args.children, names, args.nice)
             if rc != 0:
                 print(f"mutmut run for {name} exited {rc}", file=sys.stderr)
                 ok = False

@@ -13,13 +13,20 @@ import torch
 from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 from ray.rllib.env.single_agent_episode import SingleAgentEpisode
+from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
+from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
 import rllib_asor
 from rllib_asor.asor.reward import reward_bonus
 from rllib_asor.rllib.callbacks import lift_asor_metrics
 from rllib_asor.rllib.connector import AsorRewardConnector, SharedValuesGAE
-from rllib_asor.rllib.learners import disc_module_id, is_aux_module, proxy_module_id
+from rllib_asor.rllib.learners import (
+    disc_module_id,
+    is_aux_module,
+    policy_minibatches,
+    proxy_module_id,
+)
 from tests.asor.test_state_behaviour import pieces
 
 OBS = gym.spaces.Box(-10, 10, (3,), np.float32)
@@ -104,7 +111,9 @@ def test_the_learners_update_trains_the_discriminator_and_fills_the_archive():
         lifted = lift_asor_metrics(_flat(results))
         accs.append(lifted["disc_acc"])
     assert lifted["archive_states"] > 60 and lifted["real_fraction"] > 0
-    assert {"disc_loss", "js_estimate", "lambda", "aug_reward_mean", "disc_grad_penalty"} <= set(lifted)
+    assert {"disc_loss", "js_estimate", "lambda", "aug_reward_mean", "disc_grad_penalty"} <= set(
+        lifted
+    )
     # The real set (the best archived states) is the +2 cluster: ω separates it.
     with torch.no_grad():
         good = torch.as_tensor(np.stack([e.get_observations(0) for e in episodes(99)[1::2]]))
@@ -115,6 +124,7 @@ def test_the_learners_update_trains_the_discriminator_and_fills_the_archive():
 
 def _flat(results):
     """Learner results (MetricsLogger stats) as plain floats, like an iteration's result."""
+
     def value(v):
         return float(v.peek() if hasattr(v, "peek") else v)
 
@@ -171,7 +181,9 @@ def test_rewards_before_gae_are_the_env_rewards_plus_lambda_times_log_omega():
     mask = pb[Columns.LOSS_MASK].bool()
     with torch.no_grad():
         logits = lrn.module[DISC].logits(pb[Columns.OBS][mask].float())
-    expected = torch.as_tensor(env_rewards, dtype=torch.float32)[mask] + 0.1 * reward_bonus(logits, "log")
+    expected = torch.as_tensor(env_rewards, dtype=torch.float32)[mask] + 0.1 * reward_bonus(
+        logits, "log"
+    )
     assert torch.allclose(pb[Columns.REWARDS][mask].float(), expected, atol=1e-5)
     # the advantages were computed from these rewards, with the values ASOR's pass shared
     assert Columns.ADVANTAGES in pb and Columns.VALUE_TARGETS in pb
@@ -193,7 +205,9 @@ def test_shared_values_are_the_critics_values():
     assert torch.allclose(adv[mask], pb[Columns.ADVANTAGES][mask] * 0 + adv[mask])
     # bootstrap rows hold V(s_T) of truncated chunks; terminated ones have target = reward
     last = torch.nonzero(mask).squeeze(-1)[9]  # the last valid row of the first episode
-    assert pb[Columns.VALUE_TARGETS][last].item() == pytest.approx(pb[Columns.REWARDS][last].item(), abs=1e-5)
+    assert pb[Columns.VALUE_TARGETS][last].item() == pytest.approx(
+        pb[Columns.REWARDS][last].item(), abs=1e-5
+    )
 
 
 def test_rnd_per_dynamics_reads_the_dynamics_ids_of_the_episodes():
@@ -230,3 +244,29 @@ def test_every_piece_of_state_survives_the_learners_checkpoint(settings, tmp_pat
     for name, value in saved.items():
         assert torch.allclose(restored[name], value, rtol=1e-6, atol=0), name
     assert all(is_aux_module(m) or m == DEFAULT_MODULE_ID for m in other.module.keys())
+
+
+@pytest.mark.parametrize(("n_seq", "t", "minibatch"), [(10, 20, 50), (5, 4, 7), (3, 5, 100)])
+def test_policy_minibatches_of_sequence_batches_match_rllibs_iterator(n_seq, t, minibatch):
+    """Stateful modules' batches are cut along B (whole sequences): the count follows suit."""
+    policy = SampleBatch({"x": np.arange(n_seq * t), SampleBatch.SEQ_LENS: np.full(n_seq, t)})
+    policy.enable_slicing_by_batch_id()
+    alone = MiniBatchCyclicIterator(
+        MultiAgentBatch({DEFAULT_MODULE_ID: policy}, n_seq * t),
+        num_epochs=3,
+        minibatch_size=minibatch,
+        shuffle_batch_per_epoch=False,
+    )
+    expected = sum(1 for _ in alone)
+    both = MultiAgentBatch({DEFAULT_MODULE_ID: policy, DISC: SampleBatch({"x": np.arange(999)})}, 1)
+    assert policy_minibatches(both, 3, minibatch) == expected
+
+
+def test_policy_minibatches_take_the_longest_policy_and_skip_empty_ones():
+    short, long_ = SampleBatch({"x": np.arange(64)}), SampleBatch({"x": np.arange(200)})
+    batch = MultiAgentBatch(
+        {"a": short, "b": long_, "c": SampleBatch({"x": np.arange(0)}), DISC: long_}, 200
+    )
+    assert policy_minibatches(batch, 2, 64) == 7  # ⌈2·200/64⌉ from "b"
+    only_aux = MultiAgentBatch({DISC: long_, PROXY: long_}, 200)
+    assert policy_minibatches(only_aux, 2, 64) == 0

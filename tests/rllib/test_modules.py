@@ -49,3 +49,49 @@ def test_proxy_counts_are_finite_and_one_per_state(proxy):
 def test_learner_only_modules_refuse_inference():
     with pytest.raises(NotImplementedError, match="learner-only"):
         build(AsorDiscriminatorModule).forward_inference({"obs": torch.zeros(1, 37)})
+
+
+class _Metrics:
+    def __init__(self):
+        self.logged = {}
+
+    def log_value(self, key, value, window=None):
+        self.logged[key] = (value, window)
+
+    def log_dict(self, stats, key=None, window=None):
+        self.logged.update({(key, k): (v, window) for k, v in stats.items()})
+
+
+class _Learner:
+    def __init__(self):
+        self.metrics = _Metrics()
+
+
+@pytest.mark.parametrize(("proxy", "name"), [("rnd", "rnd_loss"), ("ensemble", "ensemble_loss")])
+def test_proxy_loss_is_returned_and_logged_under_its_name(proxy, name):
+    from ray.rllib.core.columns import Columns
+
+    from rllib_asor.rllib.modules import proxy_batch
+
+    module = build(AsorProxyModule, proxy=proxy, obs_keys=["vec"], seed=0)
+    x = ProxyInputs(torch.randn(8, 5), torch.randn(8, 5), torch.randn(8, 5))
+    batch = proxy_batch(x)
+    fwd = module.forward_train(batch)
+    learner = _Learner()
+    loss = module.compute_self_supervised_loss(
+        learner=learner, module_id="m", config=None, batch=batch, fwd_out=fwd
+    )
+    assert torch.equal(loss, fwd["proxy_loss"]) and loss.requires_grad
+    assert torch.allclose(loss, module.proxy.loss(x))
+    assert learner.metrics.logged == {("m", name): (pytest.approx(loss.item()), 1)}
+    assert set(batch) >= {Columns.OBS, Columns.NEXT_OBS}
+
+
+def test_discriminator_and_proxy_of_one_seed_start_from_different_weights():
+    disc = build(AsorDiscriminatorModule, seed=3, disc_hiddens=[8], rnd_hiddens=[8])
+    proxy = build(AsorProxyModule, seed=3, disc_hiddens=[8], rnd_hiddens=[8])
+    again = build(AsorProxyModule, seed=3, disc_hiddens=[8], rnd_hiddens=[8])
+    other = build(AsorProxyModule, seed=4, disc_hiddens=[8], rnd_hiddens=[8])
+    first = lambda m: next(m.parameters()).detach()  # noqa: E731
+    assert torch.equal(first(proxy), first(again)) and not torch.equal(first(proxy), first(other))
+    assert first(disc).shape != first(proxy).shape or not torch.equal(first(disc), first(proxy))

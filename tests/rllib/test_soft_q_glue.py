@@ -1,0 +1,449 @@
+"""The ASOR glue of the SAC family, built in this process (no Ray started) and fed hand-made
+transitions (issue 27): the SAC Learner's TD targets see r + λ·b with b from the discriminator
+before its step, the aux modules train once per call, V(s) is the twin critics' minimum at π's
+deterministic action, the many-Learner helpers split rows as documented, and MAPLE's bonus
+follows each setting (normalisation, potential shaping, padding)."""
+
+from __future__ import annotations
+
+import copy
+import os
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+import torch.distributed as dist
+from ray.rllib.algorithms.sac import SACConfig
+from ray.rllib.core import DEFAULT_MODULE_ID, Columns
+from ray.rllib.core.models.base import ENCODER_OUT
+
+import rllib_asor
+from rllib_asor.algorithms.sac.fast import fast_off_policy
+from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY, FlatTransitions
+from rllib_asor.asor.config import AsorConfig
+from rllib_asor.asor.proxy import ProxyInputs, make_proxy
+from rllib_asor.asor.reward import potential_shaping, reward_bonus, standardize
+from rllib_asor.asor.update import AsorState
+from rllib_asor.rllib import connector
+from rllib_asor.rllib.learners import disc_module_id, proxy_module_id, soft_q_state_values
+from rllib_asor.rllib.maple_asor import maple_asor_bonus, real_batch
+
+OBS = gym.spaces.Box(-10, 10, (3,), np.float32)
+BOX = gym.spaces.Box(-1, 1, (2,), np.float32)
+DISC, PROXY = disc_module_id(DEFAULT_MODULE_ID), proxy_module_id(DEFAULT_MODULE_ID)
+SMALL = {"disc_hiddens": [16], "rnd_hiddens": [16], "rnd_embedding_dim": 8, "seed": 0}
+
+
+def sac_learner(action_space: gym.Space = BOX, batch: int = 32, **asor):
+    config = (
+        SACConfig()
+        .environment(observation_space=OBS, action_space=action_space)
+        .training(
+            train_batch_size_per_learner=batch,
+            replay_buffer_config={"type": "EpisodeReplayBuffer", "capacity": 1000},
+        )
+        .rl_module(model_config={"fcnet_hiddens": [16]})
+        .debugging(seed=0)
+    )
+    config = rllib_asor.with_asor(fast_off_policy(config), **(SMALL | asor))
+    spaces = {"__env__": (OBS, action_space), DEFAULT_MODULE_ID: (OBS, action_space)}
+    return config.build_learner(env=None, spaces=spaces)
+
+
+def transitions(n: int = 64, seed: int = 0) -> dict[str, np.ndarray]:
+    """Rows in two clusters of observations (±2), the +2 ones paying 1, the others 0."""
+    rng = np.random.default_rng(seed)
+    centre = np.where(np.arange(n) % 2, 2.0, -2.0)[:, None]
+    obs = (rng.normal(size=(n, 3)) * 0.3 + centre).astype(np.float32)
+    return {
+        Columns.OBS: obs,
+        Columns.NEXT_OBS: (obs + 0.1).astype(np.float32),
+        Columns.ACTIONS: rng.uniform(-1, 1, (n, 2)).astype(np.float32),
+        Columns.REWARDS: (np.arange(n) % 2).astype(np.float32),
+        Columns.TERMINATEDS: np.zeros(n, bool),
+        Columns.TRUNCATEDS: np.zeros(n, bool),
+    }
+
+
+def update(learner, cols, steps: int = 1000):
+    return learner.update(
+        episodes=[FlatTransitions(cols)], timesteps={"num_env_steps_sampled_lifetime": steps}
+    )
+
+
+def params(module) -> dict[str, torch.Tensor]:
+    return {k: v.detach().clone() for k, v in module.state_dict().items()}
+
+
+def changed(before: dict, module) -> bool:
+    return any(not torch.equal(before[k], v) for k, v in module.state_dict().items())
+
+
+def test_sac_td_targets_see_the_bonus_of_the_discriminator_before_its_step(monkeypatch):
+    learner = sac_learner(preset="paper", lambda_=0.5)
+    cols = transitions()
+    disc_before = copy.deepcopy(learner.module[DISC].unwrapped().state.disc)
+    seen = []
+    real = type(learner).compute_loss_for_module
+
+    def spy(self, *, module_id, config, batch, fwd_out):
+        if module_id == DEFAULT_MODULE_ID:
+            seen.append((batch[Columns.OBS].clone(), batch[Columns.REWARDS].clone()))
+        return real(self, module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
+
+    monkeypatch.setattr(type(learner), "compute_loss_for_module", spy)
+    policy = params(learner.module[DEFAULT_MODULE_ID])
+    disc = params(learner.module[DISC])
+    proxy = params(learner.module[PROXY])
+    update(learner, cols)
+    assert len(seen) == 2  # 64 rows in minibatches of the train batch size (32)
+    env_reward = {
+        tuple(o): r for o, r in zip(cols[Columns.OBS], cols[Columns.REWARDS], strict=True)
+    }
+    for obs, rewards in seen:
+        with torch.no_grad():
+            bonus = 0.5 * reward_bonus(disc_before(obs), "log", -5.0)
+        expected = torch.tensor([env_reward[tuple(o)] for o in obs.numpy()]) + bonus
+        torch.testing.assert_close(rewards, expected)
+        assert (bonus < 0).all()
+    assert changed(policy, learner.module[DEFAULT_MODULE_ID])
+    assert changed(disc, learner.module[DISC]) and changed(proxy, learner.module[PROXY])
+
+
+def test_aux_modules_take_one_minibatch_per_call_unless_aux_epochs_is_set(monkeypatch):
+    learner = sac_learner()
+    rows = {}
+    real = type(learner)._update
+
+    def spy(self, batch, **kwargs):
+        for mid in (DISC, PROXY):
+            if mid in batch:
+                rows[mid] = rows.get(mid, 0) + len(batch[mid][Columns.OBS])
+        return real(self, batch, **kwargs)
+
+    monkeypatch.setattr(type(learner), "_update", spy)
+    update(learner, transitions(96))
+    assert learner.config.learner_config_dict[MINIBATCH_KEY] == 32
+    assert learner.aux_rows(DISC) == 32.0 and learner.aux_rows(PROXY) == 32.0
+    assert rows == {DISC: 32, PROXY: 32}  # one minibatch each, of 3 SAC steps
+
+    learner = sac_learner(aux_epochs=2)
+    rows.clear()
+    update(learner, transitions(96))
+    sizes = learner._asor_piece.aux_batch_sizes
+    assert learner.aux_rows(PROXY) == 2.0 * sizes[PROXY] == 192.0
+    assert rows[PROXY] == 96  # capped by the 3 minibatches there are
+
+
+def test_soft_q_state_values_is_the_twin_minimum_at_the_squashed_mean():
+    module = sac_learner().module[DEFAULT_MODULE_ID].unwrapped()
+    obs = torch.randn(5, 3)
+    with torch.no_grad():
+        values = soft_q_state_values(module, {Columns.OBS: obs})
+        logits = module.pi(module.pi_encoder({Columns.OBS: obs})[ENCODER_OUT])
+        action = torch.tanh(logits.chunk(2, dim=-1)[0])
+        q = module.compute_q_values({Columns.OBS: obs, Columns.ACTIONS: action})
+        q1 = module._qf_forward_train_helper(
+            {Columns.OBS: obs, Columns.ACTIONS: action}, module.qf_encoder, module.qf
+        )
+        q2 = module._qf_forward_train_helper(
+            {Columns.OBS: obs, Columns.ACTIONS: action}, module.qf_twin_encoder, module.qf_twin
+        )
+    torch.testing.assert_close(values, q)
+    torch.testing.assert_close(values, torch.minimum(q1, q2))
+
+
+def test_soft_q_state_values_is_the_policy_expectation_for_discrete_actions():
+    module = sac_learner(gym.spaces.Discrete(3)).module[DEFAULT_MODULE_ID].unwrapped()
+    obs = torch.randn(5, 3)
+    with torch.no_grad():
+        values = soft_q_state_values(module, {Columns.OBS: obs})
+        probs = torch.softmax(module.pi(module.pi_encoder({Columns.OBS: obs})[ENCODER_OUT]), -1)
+        q_all = module.compute_q_values({Columns.OBS: obs}, squeeze=False)
+    assert q_all.shape == (5, 3)
+    torch.testing.assert_close(values, (probs * q_all).sum(-1))
+
+
+# ------------------------------------------------------------------ several Learners
+def test_even_share_gives_each_rank_its_block_and_drops_the_remainder():
+    rows = torch.arange(11)
+    shares = [connector.even_share(rows, r, 3) for r in range(3)]
+    assert [s.tolist() for s in shares] == [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
+    assert connector.even_share(None, 0, 2) is None
+    x = ProxyInputs(torch.arange(8).reshape(4, 2), None, torch.arange(4) * 10)
+    half = connector.even_share_inputs(x, 1, 2)
+    assert half.features.tolist() == [[4, 5], [6, 7]]
+    assert half.actions is None and half.next_features.tolist() == [20, 30]
+
+
+def test_rank_and_size_and_gather_in_a_one_process_group(tmp_path):
+    assert connector.rank_and_size() == (0, 1)
+    os.environ.setdefault("MASTER_ADDR", "127.0.0.1")
+    dist.init_process_group(
+        "gloo", init_method=f"file://{tmp_path / 'store'}", rank=0, world_size=1
+    )
+    try:
+        assert connector.rank_and_size() == (0, 1)
+        batch = real_batch(
+            torch.ones(4, 3),
+            torch.zeros(4, 3),
+            torch.arange(4.0),
+            torch.zeros(4, dtype=torch.bool),
+            torch.full((4,), 2.0),
+            gamma=0.9,
+            timestep=7.0,
+        )
+        (got,) = connector.gather_batches(batch, "cpu")
+        torch.testing.assert_close(got.features, batch.features)
+        torch.testing.assert_close(got.env_rewards, batch.env_rewards)
+        torch.testing.assert_close(got.proxy_inputs.next_features, batch.next_features)
+        assert got.gamma == 0.9 and got.timestep == 7.0
+        assert connector.gather_batches(None, "cpu") == [None]
+    finally:
+        dist.destroy_process_group()
+    assert connector.rank_and_size() == (0, 1)
+
+
+# ------------------------------------------------------------------ MAPLE's bonus
+def _maple_case(seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    real = real_batch(
+        torch.randn(40, 3, generator=g),
+        torch.randn(40, 3, generator=g),
+        torch.rand(40, generator=g),
+        torch.zeros(40, dtype=torch.bool),
+        torch.randn(40, generator=g),
+        gamma=0.9,
+        timestep=0.0,
+    )
+    obs = torch.randn(4, 5, 3, generator=g)
+    next_obs = torch.randn(4, 5, 3, generator=g)
+    terminateds = torch.zeros(4, 5, dtype=torch.bool)
+    terminateds[1, 2] = True
+    valid = torch.ones(4, 5, dtype=torch.bool)
+    valid[3, 3:] = False
+    return real, obs, next_obs, terminateds, valid
+
+
+ROBUST_FIXED = {"lambda_": 0.2, "lambda_relative": False, "lambda_warmup": False}
+
+
+@pytest.mark.parametrize(
+    ("settings", "norm", "potential"),
+    [
+        ({"preset": "paper", "lambda_": 0.1}, "off", False),
+        (
+            {"preset": "paper", "lambda_": 0.1, "bonus_norm": "batch", "bonus_clip": 1.5},
+            "batch",
+            False,
+        ),
+        ({**ROBUST_FIXED, "bonus_share_max": 0.0}, "batch", True),
+        ({**ROBUST_FIXED, "bonus_share_max": 0.0, "bonus_norm": "running"}, "running", True),
+        (ROBUST_FIXED, "batch", True),  # the cap on the bonus's share scales λ down
+    ],
+)
+def test_maple_bonus_follows_the_settings_on_valid_steps_only(settings, norm, potential):
+    cfg = AsorConfig.from_dict({**SMALL, "real_source": "batch", **settings})
+    state = AsorState(cfg, 3)
+    real, obs, next_obs, terminateds, valid = _maple_case()
+    disc = copy.deepcopy(state.disc)
+    delta, result = maple_asor_bonus(
+        cfg,
+        state,
+        make_proxy(cfg, 3, 2, 0),
+        real,
+        obs,
+        next_obs,
+        terminateds,
+        valid,
+        np.random.default_rng(0),
+    )
+    assert delta.shape == (4, 5) and (delta[~valid] == 0).all()
+    lam = result.metrics["lambda"]
+    if settings.get("bonus_share_max", 0.2 if "preset" not in settings else 0.0):
+        assert 0.0 < lam < settings["lambda_"]
+    else:
+        assert lam == pytest.approx(settings["lambda_"])
+    m = valid.reshape(-1)
+    with torch.no_grad():
+        form = cfg.reward_form
+        # the call does not train the discriminator (the Learner does, after it); its input
+        # normaliser (robust) has seen this call's real states
+        for name, weight in disc.named_parameters():
+            torch.testing.assert_close(weight, dict(state.disc.named_parameters())[name])
+        omega = state.disc
+        b = reward_bonus(omega(obs.reshape(-1, 3)[m]), form, cfg.log_omega_min, cfg.logit_clip)
+        nb = reward_bonus(
+            omega(next_obs.reshape(-1, 3)[m]), form, cfg.log_omega_min, cfg.logit_clip
+        )
+    if norm == "batch":
+        mean, var = b.mean(), b.var(unbiased=False)
+    elif norm == "running":
+        mean, var = state.bonus_rms.mean.reshape(()), state.bonus_rms.var.reshape(())
+    if norm != "off":
+        b, nb = (standardize(x, mean, var, cfg.bonus_clip) for x in (b, nb))
+        assert b.abs().max() <= cfg.bonus_clip
+    if potential:
+        b = potential_shaping(b, nb, terminateds.reshape(-1)[m], 0.9)
+    torch.testing.assert_close(delta.reshape(-1)[m], lam * b)
+
+
+# ------------------------------------------------------------------ CQL (offline batches)
+def cql_learner(**asor):
+    from ray.rllib.algorithms.cql import CQLConfig
+
+    config = (
+        CQLConfig()
+        .environment(observation_space=OBS, action_space=BOX)
+        .training(train_batch_size_per_learner=32)
+        .rl_module(model_config={"fcnet_hiddens": [16]})
+        .debugging(seed=0)
+    )
+    config = rllib_asor.with_asor(config, **(SMALL | asor))
+    spaces = {"__env__": (OBS, BOX), DEFAULT_MODULE_ID: (OBS, BOX)}
+    return config.build_learner(env=None, spaces=spaces)
+
+
+def test_cql_lambda_schedule_follows_the_dataset_rows_trained_on(monkeypatch):
+    from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
+
+    # λ is 0 until 32 rows were trained on, then 1 (paper form: b = log ω < 0)
+    learner = cql_learner(preset="paper", lambda_=[[0, 0.0], [31, 0.0], [32, 1.0]])
+    seen = []
+    real = type(learner).compute_loss_for_module
+
+    def spy(self, *, module_id, config, batch, fwd_out):
+        if module_id == DEFAULT_MODULE_ID:
+            seen.append(batch[Columns.REWARDS].clone())
+        return real(self, module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
+
+    monkeypatch.setattr(type(learner), "compute_loss_for_module", spy)
+    cols = transitions(32)
+    cols["weights"] = np.ones(32, np.float32)
+    cols["n_step"] = np.ones(32, np.int64)
+    timesteps = {"num_env_steps_sampled_lifetime": 0}
+    for _ in range(2):
+        batch = MultiAgentBatch({DEFAULT_MODULE_ID: SampleBatch(dict(cols))}, env_steps=32)
+        learner.update(batch=batch, timesteps=timesteps)
+    assert len(seen) == 2
+    torch.testing.assert_close(seen[0], torch.from_numpy(cols[Columns.REWARDS]))
+    assert (seen[1] < torch.from_numpy(cols[Columns.REWARDS])).all()
+    assert learner._asor_offline_rows == 64
+
+
+# ------------------------------------------------------------------ MAPLE's Learner
+def maple_learner(**asor):
+    config = rllib_asor.MapleConfig().environment(observation_space=OBS, action_space=BOX)
+    config = rllib_asor.with_asor(config.debugging(seed=0), **(SMALL | asor))
+    spaces = {"__env__": (OBS, BOX), DEFAULT_MODULE_ID: (OBS, BOX)}
+    return config.build_learner(env=None, spaces=spaces)
+
+
+def maple_batch(learner, seed: int = 0, segments: int = 6, steps: int = 4, real: int = 24):
+    """Hand-made MAPLE train batch: segments (the last one padded after 2 steps) and `real`
+    flat real transitions with their GRUs' hidden states (the `real_*` columns)."""
+    from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
+
+    g = torch.Generator().manual_seed(seed)
+    h = learner.module[DEFAULT_MODULE_ID].unwrapped().settings.gru_hidden
+    b, t = segments, steps
+    valid = torch.ones(b, t, dtype=torch.bool)
+    valid[-1, 2:] = False
+    cols = {
+        "obs": torch.randn(b, t, 3, generator=g),
+        "actions": torch.rand(b, t, 2, generator=g) * 2 - 1,
+        "next_obs": torch.randn(b, t, 3, generator=g),
+        "last_actions": torch.rand(b, t, 2, generator=g) * 2 - 1,
+        "rewards": torch.rand(b, t, generator=g),
+        "terminateds": torch.zeros(b, t, dtype=torch.bool),
+        "valid": valid,
+        "policy_hidden": torch.randn(b, h, generator=g),
+        "value_hidden": torch.randn(b, h, generator=g),
+        "real_obs": torch.randn(real, 3, generator=g),
+        "real_next_obs": torch.randn(real, 3, generator=g),
+        "real_actions": torch.rand(real, 2, generator=g) * 2 - 1,
+        "real_last_actions": torch.rand(real, 2, generator=g) * 2 - 1,
+        "real_rewards": torch.rand(real, generator=g),
+        "real_terminateds": torch.arange(real) % 5 == 0,
+        "real_dynamics_ids": torch.arange(real) % 3,
+        "real_policy_hidden": torch.randn(real, h, generator=g),
+        "real_value_hidden": torch.randn(real, h, generator=g),
+    }
+    cols = {k: v.numpy() for k, v in cols.items()}
+    return cols, MultiAgentBatch({DEFAULT_MODULE_ID: SampleBatch(cols)}, env_steps=b)
+
+
+def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_step(monkeypatch):
+    from rllib_asor.algorithms.maple import learner as maple_learner_module
+    from rllib_asor.algorithms.maple.losses import state_values
+    from rllib_asor.rllib import maple_asor
+
+    learner = maple_learner(preset="paper", lambda_=0.1)
+    nets = learner.module[DEFAULT_MODULE_ID].unwrapped().nets
+    calls, bonuses, aux = [], [], []
+    real_bonus, real_losses = maple_asor.maple_asor_bonus, maple_learner_module.maple_losses
+    real_update = maple_learner_module.MapleTorchLearner._update
+
+    def bonus_spy(cfg, state, proxy, real, *args):
+        calls.append((real, args, copy.deepcopy(state.disc)))
+        out = real_bonus(cfg, state, proxy, real, *args)
+        calls[-1] += (out[1],)
+        return out
+
+    def losses_spy(nets_, b, **kw):
+        bonuses.append(kw["bonus"].clone())
+        return real_losses(nets_, b, **kw)
+
+    def update_spy(self, batch, **kw):
+        aux.append({m: {k: v.clone() for k, v in batch[m].items()} for m in (DISC, PROXY)})
+        return real_update(self, batch, **kw)
+
+    monkeypatch.setattr(maple_asor, "maple_asor_bonus", bonus_spy)
+    monkeypatch.setattr(maple_learner_module, "maple_losses", losses_spy)
+    monkeypatch.setattr(maple_learner_module.MapleTorchLearner, "_update", update_spy)
+    disc, proxy = params(learner.module[DISC]), params(learner.module[PROXY])
+    cols, batch = maple_batch(learner)
+    t = {k: torch.from_numpy(v) for k, v in cols.items()}
+    expected_values = state_values(
+        nets, t["real_obs"], t["real_last_actions"], t["real_policy_hidden"], t["real_value_hidden"]
+    )
+    results = learner.update(batch=batch, timesteps={"maple_gradient_steps": 0})
+    learner.update(batch=maple_batch(learner, seed=1)[1], timesteps={"maple_gradient_steps": 1})
+
+    real, (obs, next_obs, terminateds, valid, _), disc_before, result = calls[0]
+    torch.testing.assert_close(real.features, t["real_obs"])
+    torch.testing.assert_close(real.next_features, t["real_next_obs"])
+    torch.testing.assert_close(real.env_rewards, t["real_rewards"])
+    assert torch.equal(real.terminateds, t["real_terminateds"])
+    torch.testing.assert_close(real.proxy_inputs.actions, t["real_actions"])
+    assert torch.equal(real.proxy_inputs.dynamics_ids, t["real_dynamics_ids"])
+    torch.testing.assert_close(real.values, expected_values)
+    assert real.gamma == pytest.approx(learner.config.gamma)
+    assert (real.timestep, calls[1][0].timestep) == (0.0, 24.0)  # dataset rows ranked so far
+    torch.testing.assert_close(obs, t["obs"])
+    torch.testing.assert_close(next_obs, t["next_obs"])
+    assert torch.equal(valid, t["valid"]) and torch.equal(terminateds, t["terminateds"])
+
+    # every valid step, real or model, gets λ·log ω from the discriminator before its step
+    with torch.no_grad():
+        expected = 0.1 * reward_bonus(disc_before(t["obs"].reshape(-1, 3)), "log", -5.0)
+    expected = expected.reshape(6, 4) * t["valid"]
+    torch.testing.assert_close(bonuses[0], expected)
+    assert (bonuses[0][t["valid"]] < 0).all()
+    # the discriminator and the proxy train on the real states' partition, in the same update
+    torch.testing.assert_close(aux[0][DISC][Columns.OBS], result.disc_features)
+    torch.testing.assert_close(aux[0][DISC]["asor_label"], result.disc_labels)
+    torch.testing.assert_close(aux[0][PROXY][Columns.OBS], t["real_obs"])
+    assert changed(disc, learner.module[DISC]) and changed(proxy, learner.module[PROXY])
+    assert results[DISC]["lambda"].peek() == pytest.approx(0.1)
+
+
+def test_maple_asor_learners_with_one_seed_make_the_same_update():
+    out = []
+    for _ in range(2):
+        learner = maple_learner(preset="paper", lambda_=0.1)
+        learner.update(batch=maple_batch(learner)[1], timesteps={"maple_gradient_steps": 0})
+        out.append(params(learner.module[DISC]))
+    for k in out[0]:
+        torch.testing.assert_close(out[0][k], out[1][k])
