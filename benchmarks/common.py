@@ -124,3 +124,36 @@ def run_method_seed_grid(
             run_config=tune.RunConfig(storage_path=str(out / "tune"), verbose=0),
         ).fit()
     print(f"trained {len(specs)} runs in {time.time() - t0:.0f} s")
+
+
+def time_interleaved(
+    runners: dict[str, Any], rounds: int, block: Callable[[str], int]
+) -> dict[str, list[dict[str, float]]]:
+    """Time `runners` (objects with `.steps` and `.run(n)`) in interleaved rounds: each round
+    runs every runner for `block(name)` env steps in turn, so load drift hits them all alike.
+    Returns per runner and round {"steps", "wall_s", "steps_per_s"}."""
+    import time
+
+    out: dict[str, list[dict[str, float]]] = {n: [] for n in runners}
+    for r in range(rounds):
+        for name, runner in runners.items():
+            before, t0 = runner.steps, time.perf_counter()
+            runner.run(block(name))
+            wall = time.perf_counter() - t0
+            done = runner.steps - before
+            out[name].append({"steps": done, "wall_s": wall, "steps_per_s": done / wall})
+            print(f"round {r} {name}: {done} steps in {wall:.1f}s = {done / wall:.1f} steps/s")
+    return out
+
+
+def median_paired_ratios(rounds: dict[str, list[dict[str, float]]], base: str) -> dict[str, float]:
+    """Per runner, the median over rounds of its rate ÷ `base`'s rate in the same round (less
+    sensitive to load drift between rounds than the ratio of totals)."""
+    return {
+        n: float(
+            np.median(
+                [x["steps_per_s"] / b["steps_per_s"] for x, b in zip(rs, rounds[base], strict=True)]
+            )
+        )
+        for n, rs in rounds.items()
+    }

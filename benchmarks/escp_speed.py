@@ -27,10 +27,13 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from benchmarks.common import start_local_ray, write_json
-from rllib_asor.data.collect import MUJOCO_SAC_MODEL, MUJOCO_SAC_TRAINING
+from benchmarks.common import (
+    median_paired_ratios,
+    start_local_ray,
+    time_interleaved,
+    write_json,
+)
+from benchmarks.sac_speed import Sb3Runner, sac_config
 
 ENV_ID = "rllib_asor/Walker2dShift-v0"
 ENV_CONFIG = {"params": ["gravity"], "num_tasks": 40, "task_seed": 0}
@@ -66,28 +69,6 @@ def escp_config(args: argparse.Namespace, hiddens: list[int] | None = None) -> A
     return cfg
 
 
-def sac_config(args: argparse.Namespace) -> Any:
-    from ray.rllib.algorithms.sac import SACConfig
-
-    from rllib_asor.algorithms.sac.fast import fast_off_policy
-
-    return fast_off_policy(
-        SACConfig()
-        .environment(ENV_ID, env_config=ENV_CONFIG)
-        .env_runners(num_env_runners=0, num_envs_per_env_runner=1)
-        .learners(num_learners=0)
-        .training(
-            **MUJOCO_SAC_TRAINING,
-            num_steps_sampled_before_learning_starts=args.warmup,
-            replay_buffer_config={"type": "EpisodeReplayBuffer", "capacity": 100_000},
-            training_intensity=256,
-        )
-        .rl_module(model_config=MUJOCO_SAC_MODEL)
-        .reporting(min_sample_timesteps_per_iteration=1)
-        .debugging(seed=args.seed)
-    )
-
-
 class RllibRunner:
     """An RLlib algorithm stepped with `algo.train()` until a step target."""
 
@@ -95,7 +76,9 @@ class RllibRunner:
         import rllib_asor
 
         if name == "sac":
-            config = sac_config(args)
+            from rllib_asor.algorithms.sac.fast import fast_off_policy
+
+            config = fast_off_policy(sac_config(args, ENV_ID, ENV_CONFIG))
         elif name == "escp_asor":
             config = rllib_asor.with_asor(escp_config(args), seed=args.seed)
         else:
@@ -113,43 +96,6 @@ class RllibRunner:
         self.algo.stop()
 
 
-class Sb3Runner:
-    """Stable-Baselines3 SAC with the shared settings (benchmarks/sac_speed.py's)."""
-
-    def __init__(self, args: argparse.Namespace) -> None:
-        import gymnasium as gym
-        from stable_baselines3 import SAC
-
-        import rllib_asor.envs  # noqa: F401
-
-        self.model = SAC(
-            "MlpPolicy",
-            gym.make(ENV_ID, **ENV_CONFIG),
-            learning_rate=3e-4,
-            buffer_size=100_000,
-            learning_starts=args.warmup,
-            batch_size=256,
-            tau=0.005,
-            gamma=0.99,
-            train_freq=1,
-            gradient_steps=1,
-            ent_coef="auto",
-            policy_kwargs={"net_arch": [256, 256]},
-            seed=args.seed,
-            device="cpu",
-            verbose=0,
-        )
-        self.steps = 0
-
-    def run(self, steps: int) -> int:
-        self.model.learn(total_timesteps=steps, reset_num_timesteps=False, progress_bar=False)
-        self.steps = int(self.model.num_timesteps)
-        return self.steps
-
-    def stop(self) -> None:
-        self.model.env.close()
-
-
 def measure(args: argparse.Namespace) -> dict[str, Any]:
     names = list(args.runners)
     if "sb3" in names:
@@ -161,37 +107,18 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     runners: dict[str, Any] = {}
     for name in names:
         t0 = time.perf_counter()
-        runners[name] = Sb3Runner(args) if name == "sb3" else RllibRunner(name, args)
+        runners[name] = (
+            Sb3Runner(args, ENV_ID, ENV_CONFIG) if name == "sb3" else RllibRunner(name, args)
+        )
         runners[name].run(args.warmup + args.block)  # warm-up, then a first learning block
         print(f"{name}: built + warm-up in {time.perf_counter() - t0:.1f}s", flush=True)
-    rounds: dict[str, list[dict[str, float]]] = {n: [] for n in runners}
-    for r in range(args.rounds):
-        for name, runner in runners.items():
-            before, t0 = runner.steps, time.perf_counter()
-            runner.run(args.block)
-            wall = time.perf_counter() - t0
-            done = runner.steps - before
-            rounds[name].append({"steps": done, "wall_s": wall, "steps_per_s": done / wall})
-            print(f"round {r} {name}: {done / wall:.1f} steps/s", flush=True)
+    rounds = time_interleaved(runners, args.rounds, lambda _: args.block)
     for runner in runners.values():
         runner.stop()
     rates = {
         n: sum(x["steps"] for x in rs) / sum(x["wall_s"] for x in rs) for n, rs in rounds.items()
     }
-    paired = {}
-    for base in ("sac", "sb3"):
-        if base in rounds:
-            paired[f"vs_{base}"] = {
-                n: float(
-                    np.median(
-                        [
-                            x["steps_per_s"] / b["steps_per_s"]
-                            for x, b in zip(rs, rounds[base], strict=True)
-                        ]
-                    )
-                )
-                for n, rs in rounds.items()
-            }
+    paired = {f"vs_{b}": median_paired_ratios(rounds, b) for b in ("sac", "sb3") if b in rounds}
     return {
         "env": ENV_ID,
         "env_config": ENV_CONFIG,

@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.common import median_paired_ratios, time_interleaved
 from rllib_asor.data.collect import MUJOCO_SAC_MODEL, MUJOCO_SAC_TRAINING
 
 ENV_ID = "rllib_asor/HopperShift-v0"
@@ -67,15 +68,20 @@ LABELS = {
 
 
 class Sb3Runner:
-    """Stable-Baselines3 SAC with the shared settings."""
+    """Stable-Baselines3 SAC with the shared settings (on `env_id` made with `env_config`)."""
 
-    def __init__(self, args: argparse.Namespace) -> None:
+    def __init__(
+        self,
+        args: argparse.Namespace,
+        env_id: str = ENV_ID,
+        env_config: dict[str, Any] | None = None,
+    ) -> None:
         import gymnasium as gym
         from stable_baselines3 import SAC
 
         import rllib_asor.envs  # noqa: F401
 
-        env = gym.make(ENV_ID, params=ENV_PARAMS)
+        env = gym.make(env_id, **(env_config or {"params": ENV_PARAMS}))
         self.model = SAC(
             "MlpPolicy",
             env,
@@ -104,13 +110,15 @@ class Sb3Runner:
         self.model.env.close()
 
 
-def sac_config(args: argparse.Namespace) -> Any:
+def sac_config(
+    args: argparse.Namespace, env_id: str = ENV_ID, env_config: dict[str, Any] | None = None
+) -> Any:
     """RLlib SAC with the shared settings (what a user writes for SB3-like SAC)."""
     from ray.rllib.algorithms.sac import SACConfig
 
     return (
         SACConfig()
-        .environment(ENV_ID, env_config={"params": ENV_PARAMS})
+        .environment(env_id, env_config=env_config or {"params": ENV_PARAMS})
         .env_runners(num_env_runners=0, num_envs_per_env_runner=1)
         .learners(num_learners=0)
         .training(
@@ -169,16 +177,9 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         runners[name] = make_runner(name, args)
         runners[name].run(args.warmup)
         print(f"{name}: built + {args.warmup} warm-up steps in {time.perf_counter() - t0:.1f}s")
-    rounds: dict[str, list[dict[str, float]]] = {n: [] for n in runners}
-    for r in range(args.rounds):
-        for name, runner in runners.items():
-            before = runner.steps
-            t0 = time.perf_counter()
-            runner.run(args.stock_block if name.endswith("_stock") else args.block)
-            wall = time.perf_counter() - t0
-            done = runner.steps - before
-            rounds[name].append({"steps": done, "wall_s": wall, "steps_per_s": done / wall})
-            print(f"round {r} {name}: {done} steps in {wall:.1f}s = {done / wall:.1f} steps/s")
+    rounds = time_interleaved(
+        runners, args.rounds, lambda n: args.stock_block if n.endswith("_stock") else args.block
+    )
     for runner in runners.values():
         runner.stop()
     rates = {
@@ -188,19 +189,8 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     for base in ("sb3", "rllib_stock"):
         if base in rates:
             ratios[f"vs_{base}"] = {n: v / rates[base] for n, v in rates.items()}
-            # per round, each runner against the base's block of the same round (load drifts
-            # between rounds; the median of these paired ratios is less sensitive to it)
-            paired[f"vs_{base}"] = {
-                n: float(
-                    np.median(
-                        [
-                            x["steps_per_s"] / b["steps_per_s"]
-                            for x, b in zip(rs, rounds[base], strict=True)
-                        ]
-                    )
-                )
-                for n, rs in rounds.items()
-            }
+            # per round, each runner against the base's block of the same round
+            paired[f"vs_{base}"] = median_paired_ratios(rounds, base)
     return {
         "env": ENV_ID,
         "settings": {
