@@ -7,10 +7,10 @@ with the default `kernel_type rbf_element_wise`).
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
+from rllib_asor.algorithms.common.settings import is_int_at_least, is_number, refuse_unknown
 from rllib_asor.algorithms.escp.rmdm import KERNELS
 
 
@@ -99,12 +99,7 @@ class EscpSettings:
             return d
         if not isinstance(d, dict):
             raise ValueError(f"escp={d!r} is not allowed; expected a mapping of ESCP settings")
-        names = [f.name for f in fields(cls)]
-        unknown = sorted(set(d) - set(names))
-        if unknown:
-            raise ValueError(
-                f"escp.{unknown[0]} is not an ESCP setting; expected one of: {', '.join(names)}"
-            )
+        refuse_unknown("escp", "an ESCP", sorted(d), [f.name for f in fields(cls)])
         return cls(**d)
 
     def to_dict(self) -> dict[str, Any]:
@@ -115,15 +110,13 @@ class EscpSettings:
 
 def _int(s: EscpSettings, key: str, low: int) -> None:
     v = getattr(s, key)
-    if isinstance(v, bool) or not isinstance(v, int) or v < low:
+    if not is_int_at_least(low)(v):
         raise ValueError(f"escp.{key}={v!r} is not allowed; expected an int ≥ {low}")
 
 
 def _num(s: EscpSettings, key: str, low: float, high: float | None, open_low: bool = False) -> None:
     v = getattr(s, key)
-    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-    ok = ok and (v > low if open_low else v >= low) and (high is None or v <= high)
-    if not ok:
+    if not is_number(low, high, open_low)(v):
         rng = f"{'>' if open_low else '≥'} {low}" + ("" if high is None else f" and ≤ {high}")
         raise ValueError(f"escp.{key}={v!r} is not allowed; expected a number {rng}")
     object.__setattr__(s, key, float(v))

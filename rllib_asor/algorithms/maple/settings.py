@@ -10,10 +10,11 @@ YAML `maple:` block. A bad value raises ValueError naming the key, the value and
 from __future__ import annotations
 
 import dataclasses
-import difflib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from rllib_asor.algorithms.common.settings import is_int_at_least, is_number, refuse_unknown
 
 
 @dataclass
@@ -74,13 +75,7 @@ class MapleSettings:
         """Validated settings; unknown keys and bad values raise ValueError."""
         settings = dict(settings or {})
         names = [f.name for f in dataclasses.fields(cls)]
-        for key in settings:
-            if key not in names:
-                close = difflib.get_close_matches(key, names, n=1)
-                hint = f" (did you mean {close[0]!r}?)" if close else ""
-                raise ValueError(
-                    f"maple.{key} is not a MAPLE setting{hint}: allowed {', '.join(names)}"
-                )
+        refuse_unknown("maple", "a MAPLE", settings, names)
         out = cls(**settings)
         out.validate()
         return out
@@ -106,25 +101,25 @@ class MapleSettings:
             "ensemble_patience",
             "evaluation_episodes",
         ):
-            _check(self, key, _int_at_least(1), "an integer >= 1")
-        _check(self, "evaluation_interval", _int_at_least(0), "an integer >= 0")
+            _check(self, key, is_int_at_least(1), "an integer >= 1")
+        _check(self, "evaluation_interval", is_int_at_least(0), "an integer >= 0")
         _check(
             self,
             "ensemble_max_epochs",
-            lambda v: v is None or _int_at_least(1)(v),
+            lambda v: v is None or is_int_at_least(1)(v),
             "null or an integer >= 1",
         )
         for key in ("penalty_coef", "penalty_clip", "clip_floor", "ensemble_weight_decay"):
-            _check(self, key, _number(0.0, None), "a number >= 0")
+            _check(self, key, is_number(0.0, None), "a number >= 0")
         for key in ("actor_lr", "critic_lr", "alpha_lr", "ensemble_lr"):
-            _check(self, key, _number(0.0, None, strict=True), "a number > 0")
-        _check(self, "tau", _number(0.0, 1.0, strict=True), "a number in (0, 1]")
-        _check(self, "real_ratio", _number(0.0, 1.0), "a number in [0, 1]")
+            _check(self, key, is_number(0.0, None, open_low=True), "a number > 0")
+        _check(self, "tau", is_number(0.0, 1.0, open_low=True), "a number in (0, 1]")
+        _check(self, "real_ratio", is_number(0.0, 1.0), "a number in [0, 1]")
         _check(
             self,
             "hiddens",
             lambda v: (
-                isinstance(v, list | tuple) and len(v) > 0 and all(_int_at_least(1)(x) for x in v)
+                isinstance(v, list | tuple) and len(v) > 0 and all(is_int_at_least(1)(x) for x in v)
             ),
             "a non-empty list of integers >= 1",
         )
@@ -140,21 +135,6 @@ class MapleSettings:
                 f"<= ensemble_members ({self.ensemble_members})"
             )
         self.hiddens = [int(x) for x in self.hiddens]
-
-
-def _int_at_least(lo: int) -> Any:
-    return lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= lo
-
-
-def _number(lo: float, hi: float | None, strict: bool = False) -> Any:
-    def ok(v: Any) -> bool:
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            return False
-        if (v <= lo) if strict else (v < lo):
-            return False
-        return hi is None or v <= hi
-
-    return ok
 
 
 def _check(s: MapleSettings, key: str, ok: Any, allowed: str) -> None:

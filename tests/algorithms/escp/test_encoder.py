@@ -51,5 +51,11 @@ def test_settings_defaults_and_errors() -> None:
         EscpSettings.from_dict({"history_len": 0})
     with pytest.raises(ValueError, match=r"escp.kernel='inner'"):
         EscpSettings.from_dict({"kernel": "inner"})
-    with pytest.raises(ValueError, match=r"escp.windw is not an ESCP setting"):
+    with pytest.raises(
+        ValueError, match=r"escp.windw is not an ESCP setting: allowed context_dim, "
+    ):
         EscpSettings.from_dict({"windw": 3})
+    with pytest.raises(ValueError, match=r"escp.history_length .*\(did you mean 'history_len'\?\)"):
+        EscpSettings.from_dict({"history_length": 3})
+    with pytest.raises(ValueError, match=r"escp.encoder_lr=nan .*number > 0"):
+        EscpSettings.from_dict({"encoder_lr": float("nan")})

@@ -177,6 +177,12 @@ def test_maple_policy_refuses_stateless_inference(parts, tmp_path):
         ({"ensemble_elites": 9}, r"maple.ensemble_elites=9 is invalid: allowed an integer <= "),
         ({"horizn": 5}, r"maple.horizn is not a MAPLE setting \(did you mean 'horizon'\?\)"),
         ({"context": "yes"}, r"maple.context='yes' is invalid: allowed true or false"),
+        ({"actor_lr": float("nan")}, r"maple.actor_lr=nan is invalid: allowed a number > 0"),
+        (
+            {"penalty_coef": float("inf")},
+            r"maple.penalty_coef=inf is invalid: allowed a number >= 0",
+        ),
+        ({"tau": 0}, r"maple.tau=0 is invalid: allowed a number in \(0, 1\]"),
     ],
 )
 def test_bad_settings_name_the_key_the_value_and_what_is_allowed(settings, match):
