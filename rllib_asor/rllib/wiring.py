@@ -15,6 +15,7 @@ What it wires in:
 from __future__ import annotations
 
 import copy
+import dataclasses
 from typing import Any
 
 from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
@@ -101,13 +102,13 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
         learner_config_dict={**(config.learner_config_dict or {}), "asor": asor_dict},
     )
     add_callbacks(config, AsorMetricsCallback)
-    if config.is_multi_agent and config.policies_to_train is not None:
+    if config.policies_to_train is not None:  # single-agent configs may set it too
         config.multi_agent(policies_to_train=_AlsoTrainAux(config.policies_to_train))
     return config
 
 
 def _algorithm_name(config: AlgorithmConfig) -> str:
-    """"PPO", "SAC", ... for the config's algorithm or a subclass of one (`OverlappedPPO`)."""
+    """ "PPO", "SAC", ... for the config's algorithm or a subclass of one (`OverlappedPPO`)."""
     cls = config.algo_class
     if cls is None:
         return type(config).__name__
@@ -154,8 +155,12 @@ def _module_spec(config: AlgorithmConfig, asor: AsorConfig) -> AsorMultiRLModule
     existing = config._rl_module_spec
     pids = trained_policy_ids(config)
     all_pids = list(config.policies) if config.is_multi_agent else [DEFAULT_MODULE_ID]
+    keep: dict[str, Any] = {}
     if isinstance(existing, MultiRLModuleSpec):
         specs = {m: s for m, s in existing.rl_module_specs.items() if not is_aux_module(m)}
+        # the user's own settings of the spec (a custom MultiRLModule class, its config)
+        fields = [f.name for f in dataclasses.fields(MultiRLModuleSpec) if f.name != "module_specs"]
+        keep = {name: getattr(existing, name) for name in fields}
     elif isinstance(existing, RLModuleSpec):
         specs = {pid: copy.deepcopy(existing) for pid in all_pids}
     else:
@@ -180,4 +185,4 @@ def _module_spec(config: AlgorithmConfig, asor: AsorConfig) -> AsorMultiRLModule
                 model_config=dict(model_config),
                 **spaces,
             )
-    return AsorMultiRLModuleSpec(rl_module_specs=specs)
+    return AsorMultiRLModuleSpec(**{**keep, "rl_module_specs": specs})

@@ -35,7 +35,7 @@ DISC, PROXY = disc_module_id(DEFAULT_MODULE_ID), proxy_module_id(DEFAULT_MODULE_
 SMALL = {"disc_hiddens": [16], "rnd_hiddens": [16], "rnd_embedding_dim": 8, "seed": 0}
 
 
-def learner(**asor):
+def learner(policies_to_train=None, **asor):
     config = (
         PPOConfig()
         .environment(observation_space=OBS, action_space=ACT)
@@ -43,6 +43,8 @@ def learner(**asor):
         .rl_module(model_config={"fcnet_hiddens": [16]})
         .debugging(seed=0)
     )
+    if policies_to_train is not None:  # a single-agent config may name its policy
+        config.multi_agent(policies_to_train=policies_to_train)
     config = rllib_asor.with_asor(config, **(SMALL | asor))
     spaces = {"__env__": (OBS, ACT), DEFAULT_MODULE_ID: (OBS, ACT)}
     return config.build_learner(env=None, spaces=spaces)
@@ -90,8 +92,9 @@ def module_batch(lrn, eps):
 
 
 # ------------------------------------------------------------------ training
-def test_the_learners_update_trains_the_discriminator_and_fills_the_archive():
-    lrn = learner(mode="srpo", lambda_warmup=False, disc_lr=1e-2)
+@pytest.mark.parametrize("policies_to_train", [None, [DEFAULT_MODULE_ID]])
+def test_the_learners_update_trains_the_discriminator_and_fills_the_archive(policies_to_train):
+    lrn = learner(policies_to_train, mode="srpo", lambda_warmup=False, disc_lr=1e-2)
     disc = lrn.module[DISC]
     before = {k: v.clone() for k, v in disc.state.disc.net.state_dict().items()}
     policy_before = {k: v.clone() for k, v in lrn.module[DEFAULT_MODULE_ID].state_dict().items()}
