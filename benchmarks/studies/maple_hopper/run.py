@@ -127,6 +127,26 @@ def evaluate_run(algo: Any, method: str, args: argparse.Namespace, episodes: int
     return maple_evaluate(module.nets, manifest, episodes=episodes, seed=100_000)
 
 
+def data_fingerprint(paths: list[str]) -> str:
+    """A hash of the rows of the dataset parts (not of the files' names or metadata): `make
+    datasets` is rerun in each session (data/ is not committed), and runs are only paired
+    when they trained on the same rows (summarise.py checks)."""
+    import hashlib
+    import json
+
+    import pyarrow.parquet as pq
+
+    h = hashlib.sha256()
+    for part in paths:
+        files = sorted(Path(part).glob("*.parquet"))
+        rows = [
+            json.dumps(pq.read_table(f).to_pydict(), sort_keys=True, default=str) for f in files
+        ]
+        for digest in sorted(hashlib.sha256(r.encode()).hexdigest() for r in rows):
+            h.update(digest.encode())
+    return h.hexdigest()[:16]
+
+
 def run_one(dataset: str, method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
     import numpy as np
 
@@ -160,6 +180,7 @@ def run_one(dataset: str, method: str, seed: int, args: argparse.Namespace) -> d
 
     return {
         "dataset": dataset,
+        "data_fingerprint": data_fingerprint(parts(args, dataset)),
         "method": method,
         "seed": seed,
         "iters": args.iters,
@@ -199,7 +220,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--datasets", nargs="+", default=["medium", "random"])
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
-    p.add_argument("--iters", type=int, default=10, help="iterations per run")
+    p.add_argument("--iters", type=int, default=20, help="iterations per run (the rule: 20)")
     p.add_argument("--steps-per-iter", type=int, default=1000, help="gradient steps per iteration")
     p.add_argument(
         "--rollout-batch-size", type=int, default=50_000, help="model rollouts per iteration"

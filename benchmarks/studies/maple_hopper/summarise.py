@@ -36,9 +36,15 @@ ORDER = ("maple", "maple_asor_paper", "maple_asor", "mopo", "cql")
 def load(runs: Path) -> dict[tuple[str, str], dict[int, dict[str, Any]]]:
     """{(dataset, method): {seed: run}}."""
     out: dict[tuple[str, str], dict[int, dict[str, Any]]] = {}
+    prints: dict[str, dict[str, list[str]]] = {}
     for path in sorted(runs.glob("*.json")):
         r = json.loads(path.read_text())
         out.setdefault((r["dataset"], r["method"]), {})[int(r["seed"])] = r
+        fp = r.get("data_fingerprint", "unrecorded")
+        prints.setdefault(r["dataset"], {}).setdefault(fp, []).append(path.name)
+    mixed = {ds: fps for ds, fps in prints.items() if len(fps) > 1}
+    if mixed:  # data/ is rebuilt each session: pairs must have trained on the same rows
+        raise SystemExit(f"runs of one dataset trained on different data: {mixed}")
     return out
 
 
