@@ -1,0 +1,80 @@
+"""The ASOR piece on two Learners (a real two-process gloo group, no Ray): the rewards each rank
+gets and the aux batches it trains on are exactly those one Learner computes on both ranks'
+episodes together — its own rows' bonus, an equal share of the discriminator's and the proxy's
+batches (rllib_asor/rllib/connector.py, "Several Learners")."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+from pathlib import Path
+
+import pytest
+import torch
+import torch.distributed as dist
+from ray.rllib.core import DEFAULT_MODULE_ID, Columns
+
+from rllib_asor.rllib.connector import even_share
+from tests.rllib.test_glue_behaviour import DISC, PROXY, episodes, learner, module_batch
+
+SETTINGS = {
+    "paper": {"preset": "paper", "lambda_": 0.3},
+    "robust": {"lambda_warmup": False, "lambda_": 0.3},
+    "srpo": {"mode": "srpo", "preset": "paper", "lambda_": 0.3},
+}
+
+
+def _pieces(batch: dict) -> dict[str, torch.Tensor]:
+    out = {
+        "rewards": batch[DEFAULT_MODULE_ID][Columns.REWARDS].clone(),
+        "disc_obs": batch[DISC][Columns.OBS].clone(),
+        "disc_labels": batch[DISC]["asor_label"].clone(),
+    }
+    if PROXY in batch:
+        out["proxy_obs"] = batch[PROXY][Columns.OBS].clone()
+    return out
+
+
+def _rank(rank: int, store: str, out: str, settings: dict) -> None:
+    torch.set_num_threads(1)
+    dist.init_process_group("gloo", init_method=f"file://{store}", rank=rank, world_size=2)
+    try:
+        lrn = learner(**settings)
+        first = _pieces(module_batch(lrn, episodes(10 + rank)))
+        second = _pieces(module_batch(lrn, episodes(20 + rank)))  # ASOR state carried over
+        torch.save({"first": first, "second": second}, Path(out) / f"{rank}.pt")
+    finally:
+        dist.destroy_process_group()
+
+
+@pytest.mark.parametrize("name", sorted(SETTINGS))
+def test_two_learners_get_what_one_learner_computes_on_both_batches(name, tmp_path):
+    settings = SETTINGS[name]
+    ctx = mp.get_context("spawn")
+    procs = [
+        ctx.Process(target=_rank, args=(r, str(tmp_path / "store"), str(tmp_path), settings))
+        for r in range(2)
+    ]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(timeout=300)
+    assert [p.exitcode for p in procs] == [0, 0]
+    ranks = [torch.load(tmp_path / f"{r}.pt") for r in range(2)]
+
+    one = learner(**settings)
+    for call, seeds in (("first", (10, 11)), ("second", (20, 21))):
+        whole = _pieces(module_batch(one, episodes(seeds[0]) + episodes(seeds[1])))
+        parts = [r[call] for r in ranks]
+        # each rank's rows get the bonus one Learner gives them (rank 0's rows come first)
+        n0 = parts[0]["rewards"].shape[0]
+        torch.testing.assert_close(parts[0]["rewards"], whole["rewards"][:n0])
+        torch.testing.assert_close(parts[1]["rewards"], whole["rewards"][n0:])
+        # the aux batches: an equal share each of the one-Learner batch
+        for key in ("disc_obs", "disc_labels", "proxy_obs"):
+            assert (key in whole) == (key in parts[0]) == (key in parts[1])
+            if key in whole:
+                for r in range(2):
+                    torch.testing.assert_close(parts[r][key], even_share(whole[key], r, 2))
+        # ... and the bonus is there: the env pays only -0.02, 0 and 1
+        plain = torch.tensor([-0.02, 0.0, 1.0])
+        assert (whole["rewards"].reshape(-1, 1) - plain).abs().min(-1).values.max() > 1e-4
