@@ -1,7 +1,8 @@
 """The ASOR piece on two Learners (a real two-process gloo group, no Ray): the rewards each rank
 gets and the aux batches it trains on are exactly those one Learner computes on both ranks'
 episodes together — its own rows' bonus, an equal share of the discriminator's and the proxy's
-batches (rllib_asor/rllib/connector.py, "Several Learners")."""
+batches (rllib_asor/rllib/connector.py, "Several Learners"); for MAPLE+ASOR the same with the
+real states of both ranks ranked together (rllib_asor/rllib/maple_asor.py)."""
 
 from __future__ import annotations
 
@@ -78,3 +79,72 @@ def test_two_learners_get_what_one_learner_computes_on_both_batches(name, tmp_pa
         # ... and the bonus is there: the env pays only -0.02, 0 and 1
         plain = torch.tensor([-0.02, 0.0, 1.0])
         assert (whole["rewards"].reshape(-1, 1) - plain).abs().min(-1).values.max() > 1e-4
+
+
+def _maple_pieces(learner, batch) -> dict[str, torch.Tensor]:
+    """Run one MAPLE+ASOR update; the bonus MAPLE's loss got and the aux batches."""
+    from rllib_asor.algorithms.maple import learner as maple_learner_module
+
+    got: dict[str, torch.Tensor] = {}
+    real_losses = maple_learner_module.maple_losses
+    real_update = maple_learner_module.MapleTorchLearner._update
+
+    def losses(nets, b, **kw):
+        got["bonus"] = kw["bonus"].clone()
+        return real_losses(nets, b, **kw)
+
+    def update(self, batch, **kw):
+        got["disc_obs"] = batch[DISC][Columns.OBS].clone()
+        got["proxy_obs"] = batch[PROXY][Columns.OBS].clone()
+        return real_update(self, batch, **kw)
+
+    maple_learner_module.maple_losses = losses
+    maple_learner_module.MapleTorchLearner._update = update
+    try:
+        learner.update(batch=batch, timesteps={"maple_gradient_steps": 0})
+    finally:
+        maple_learner_module.maple_losses = real_losses
+        maple_learner_module.MapleTorchLearner._update = real_update
+    return got
+
+
+def _maple_rank(rank: int, store: str, out: str) -> None:
+    from tests.rllib.test_soft_q_glue import maple_batch, maple_learner
+
+    torch.set_num_threads(1)
+    dist.init_process_group("gloo", init_method=f"file://{store}", rank=rank, world_size=2)
+    try:
+        lrn = maple_learner(preset="paper", lambda_=0.1)
+        torch.save(_maple_pieces(lrn, maple_batch(lrn, seed=rank)[1]), Path(out) / f"{rank}.pt")
+    finally:
+        dist.destroy_process_group()
+
+
+def test_two_maple_learners_rank_all_real_states_and_keep_their_own_bonus(tmp_path):
+    import numpy as np
+    from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
+
+    from tests.rllib.test_soft_q_glue import maple_batch, maple_learner
+
+    ctx = mp.get_context("spawn")
+    procs = [
+        ctx.Process(target=_maple_rank, args=(r, str(tmp_path / "s"), str(tmp_path)))
+        for r in (0, 1)
+    ]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(timeout=300)
+    assert [p.exitcode for p in procs] == [0, 0]
+    ranks = [torch.load(tmp_path / f"{r}.pt") for r in range(2)]
+
+    one = maple_learner(preset="paper", lambda_=0.1)
+    cols = [maple_batch(one, seed=r)[0] for r in (0, 1)]
+    both = {k: np.concatenate([c[k] for c in cols]) for k in cols[0]}
+    whole = _maple_pieces(one, MultiAgentBatch({DEFAULT_MODULE_ID: SampleBatch(both)}, 12))
+    n0 = ranks[0]["bonus"].shape[0]
+    torch.testing.assert_close(ranks[0]["bonus"], whole["bonus"][:n0])
+    torch.testing.assert_close(ranks[1]["bonus"], whole["bonus"][n0:])
+    for key in ("disc_obs", "proxy_obs"):
+        for r in range(2):
+            torch.testing.assert_close(ranks[r][key], even_share(whole[key], r, 2))

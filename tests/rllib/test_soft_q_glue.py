@@ -226,6 +226,29 @@ def _maple_case(seed: int = 0):
     return real, obs, next_obs, terminateds, valid
 
 
+def test_maple_bonus_is_zero_without_real_states():
+    cfg = AsorConfig.from_dict({**SMALL, "preset": "paper", "lambda_": 0.1})
+    real, obs, next_obs, terminateds, valid = _maple_case()
+    empty = real_batch(
+        *(x[:0] for x in (real.features, real.next_features, real.env_rewards, real.terminateds)),
+        real.values[:0],
+        gamma=0.9,
+        timestep=0.0,
+    )
+    delta, result = maple_asor_bonus(
+        cfg,
+        AsorState(cfg, 3),
+        make_proxy(cfg, 3, 2, 0),
+        empty,
+        obs,
+        next_obs,
+        terminateds,
+        valid,
+        np.random.default_rng(0),
+    )
+    assert result.metrics == {} and torch.equal(delta, torch.zeros(4, 5))
+
+
 ROBUST_FIXED = {"lambda_": 0.2, "lambda_relative": False, "lambda_warmup": False}
 
 
@@ -241,6 +264,8 @@ ROBUST_FIXED = {"lambda_": 0.2, "lambda_relative": False, "lambda_warmup": False
         ({**ROBUST_FIXED, "bonus_share_max": 0.0}, "batch", True),
         ({**ROBUST_FIXED, "bonus_share_max": 0.0, "bonus_norm": "running"}, "running", True),
         (ROBUST_FIXED, "batch", True),  # the cap on the bonus's share scales λ down
+        ({**ROBUST_FIXED, "bonus_share_max": 0.0, "logit_clip": 0.5}, "batch", True),
+        ({"preset": "paper", "lambda_": 0.1, "shaping": "potential"}, "off", True),
     ],
 )
 def test_maple_bonus_follows_the_settings_on_valid_steps_only(settings, norm, potential):
@@ -409,7 +434,8 @@ def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_st
         nets, t["real_obs"], t["real_last_actions"], t["real_policy_hidden"], t["real_value_hidden"]
     )
     results = learner.update(batch=batch, timesteps={"maple_gradient_steps": 0})
-    learner.update(batch=maple_batch(learner, seed=1)[1], timesteps={"maple_gradient_steps": 1})
+    for i in (1, 2):
+        later = learner.update(batch=maple_batch(learner, seed=i)[1], timesteps={"s": i})
 
     real, (obs, next_obs, terminateds, valid, _), disc_before, result = calls[0]
     torch.testing.assert_close(real.features, t["real_obs"])
@@ -420,7 +446,10 @@ def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_st
     assert torch.equal(real.proxy_inputs.dynamics_ids, t["real_dynamics_ids"])
     torch.testing.assert_close(real.values, expected_values)
     assert real.gamma == pytest.approx(learner.config.gamma)
-    assert (real.timestep, calls[1][0].timestep) == (0.0, 24.0)  # dataset rows ranked so far
+    # λ's timestep: the dataset rows ranked so far
+    assert [c[0].timestep for c in calls] == [0.0, 24.0, 48.0]
+    # each update reports its own ASOR statistics (not a mean over updates)
+    assert later[DISC]["value_mean"].peek() == pytest.approx(calls[2][3].metrics["value_mean"])
     torch.testing.assert_close(obs, t["obs"])
     torch.testing.assert_close(next_obs, t["next_obs"])
     assert torch.equal(valid, t["valid"]) and torch.equal(terminateds, t["terminateds"])
@@ -439,11 +468,28 @@ def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_st
     assert results[DISC]["lambda"].peek() == pytest.approx(0.1)
 
 
-def test_maple_asor_learners_with_one_seed_make_the_same_update():
-    out = []
-    for _ in range(2):
-        learner = maple_learner(preset="paper", lambda_=0.1)
+def test_maple_asor_partition_follows_the_asor_seed(monkeypatch):
+    """`mode: random` draws D_P from the Learner's generator, seeded by `asor.seed`."""
+    from rllib_asor.rllib import maple_asor
+
+    labels = []
+    real_bonus = maple_asor.maple_asor_bonus
+
+    def spy(*args):
+        out = real_bonus(*args)
+        labels.append(out[1].disc_labels.clone())
+        return out
+
+    monkeypatch.setattr(maple_asor, "maple_asor_bonus", spy)
+    for seed in (0, 0, 1):
+        learner = maple_learner(preset="paper", mode="random", lambda_=0.1, seed=seed)
         learner.update(batch=maple_batch(learner)[1], timesteps={"maple_gradient_steps": 0})
-        out.append(params(learner.module[DISC]))
-    for k in out[0]:
-        torch.testing.assert_close(out[0][k], out[1][k])
+    assert torch.equal(labels[0], labels[1]) and not torch.equal(labels[0], labels[2])
+
+
+def test_maple_srpo_mode_trains_without_a_proxy():
+    learner = maple_learner(preset="paper", mode="srpo", lambda_=0.1)
+    assert PROXY not in learner.module.keys()
+    disc = params(learner.module[DISC])
+    results = learner.update(batch=maple_batch(learner)[1], timesteps={"maple_gradient_steps": 0})
+    assert changed(disc, learner.module[DISC]) and PROXY not in results

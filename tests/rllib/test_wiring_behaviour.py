@@ -42,6 +42,7 @@ from rllib_asor.rllib.maple_asor import AsorMapleTorchLearner
 from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 from rllib_asor.rllib.trainable import _asor_init, asor_trainable
 from rllib_asor.rllib.wiring import (
+    SUPPORTED,
     AsorMultiRLModuleSpec,
     _algorithm_name,
     _AlsoTrainAux,
@@ -384,7 +385,14 @@ def test_aux_modules_inherit_their_policys_spaces_when_built_and_keep_their_own(
 
 
 # ------------------------------------------------------------------ Tune trainables
-def test_asor_trainable_is_a_named_cached_subclass_of_the_runs_algorithm():
+@pytest.fixture
+def fresh_trainables(monkeypatch):
+    """No trainable class cached yet (as in a new process): each test makes its own."""
+    for name in [n for n in vars(trainable) if n.startswith("Asor") and n[4:] in SUPPORTED]:
+        monkeypatch.delitem(vars(trainable), name)
+
+
+def test_asor_trainable_is_a_named_cached_subclass_of_the_runs_algorithm(fresh_trainables):
     cls = asor_trainable("PPO")
     assert cls.__name__ == cls.__qualname__ == "AsorPPO"
     assert cls.__module__ == "rllib_asor.rllib.trainable"
@@ -402,7 +410,7 @@ def test_asor_trainable_refuses_an_unsupported_run_naming_the_supported_ones():
     assert str(err.value) == "ASOR does not support run='DQN': supported CQL, ESCP, MAPLE, PPO, SAC"
 
 
-def test_the_trainables_constructor_applies_the_asor_block(monkeypatch):
+def test_the_trainables_constructor_applies_the_asor_block(monkeypatch, fresh_trainables):
     seen = []
     monkeypatch.setattr(OverlappedPPO, "__init__", lambda self, config=None: seen.append(config))
     cls = asor_trainable("PPO")
@@ -413,8 +421,7 @@ def test_the_trainables_constructor_applies_the_asor_block(monkeypatch):
     assert seen[1].lr == 0.5
 
 
-def test_module_getattr_recreates_a_trainable_class_by_name(monkeypatch):
-    monkeypatch.delitem(vars(trainable), "AsorCQL", raising=False)
+def test_module_getattr_recreates_a_trainable_class_by_name(fresh_trainables):
     cls = trainable.AsorCQL  # through the module's __getattr__ (as unpickling does)
     assert cls is asor_trainable("CQL")
     assert cls.__bases__ == (CQL,)
@@ -438,14 +445,17 @@ class Recorder:
         self.config, self.args, self.kwargs = config, args, kwargs
 
 
-class Recorded(Recorder):
-    __init__ = _asor_init(Recorder)
+def recorded(*args, **kwargs) -> Recorder:
+    """A Recorder built through `_asor_init` (made here, not at import, so that it is the
+    `_asor_init` of the code under test)."""
+    cls = type("Recorded", (Recorder,), {"__init__": _asor_init(Recorder)})
+    return cls(*args, **kwargs)
 
 
 def test_a_config_dict_with_an_asor_block_becomes_a_wired_algorithm_config():
     given = {"asor": dict(SETTINGS), "lr": 0.25, "gamma": 0.9}
     before = {"asor": dict(SETTINGS), "lr": 0.25, "gamma": 0.9}
-    made = Recorded(given, "positional", flag=True)
+    made = recorded(given, "positional", flag=True)
     assert isinstance(made.config, PPOConfig)
     assert made.config.lr == 0.25 and made.config.gamma == 0.9
     assert made.config.learner_class is AsorPPOTorchLearner
@@ -456,7 +466,7 @@ def test_a_config_dict_with_an_asor_block_becomes_a_wired_algorithm_config():
 
 def test_an_asor_block_of_none_gives_the_plain_config_dict():
     given = {"asor": None, "lr": 0.25}
-    made = Recorded(given)
+    made = recorded(given)
     assert made.config == {"lr": 0.25} and type(made.config) is dict
     assert given == {"asor": None, "lr": 0.25}
 
@@ -465,7 +475,7 @@ def test_an_asor_block_of_none_gives_the_plain_config_dict():
     "config", [{"lr": 0.25}, None, PPOConfig()], ids=["dict", "none", "config"]
 )
 def test_a_config_without_an_asor_block_passes_through_unchanged(config):
-    made = Recorded(config, "positional", flag=True)
+    made = recorded(config, "positional", flag=True)
     assert made.config is config
     assert made.args == ("positional",) and made.kwargs == {"flag": True}
 
