@@ -163,7 +163,7 @@ def test_the_proxy_is_trained_on_the_batch_and_the_policy_keeps_its_minibatches(
 
 def test_aux_epochs_sets_the_rows_the_aux_modules_train_on():
     rows = {}
-    for epochs in (0.5, 3):
+    for epochs in (0.5, 1, 3):
         lrn = learner(aux_epochs=epochs)
         update(lrn, episodes(0))
         assert lrn.aux_rows(PROXY) == 60 * epochs
@@ -171,7 +171,7 @@ def test_aux_epochs_sets_the_rows_the_aux_modules_train_on():
     # Half a pass: one minibatch of 30 rows, then the proxy leaves the iterator. Three passes
     # would be 180 rows, but the aux modules never add minibatches to the policy's: 2 epochs
     # of its 66 rows (60 steps + 6 bootstrap rows) in minibatches of 30 are 5, so 150 rows.
-    assert rows == {0.5: 30, 3: 150}
+    assert rows == {0.5: 30, 1: 60, 3: 150}  # one pass: exactly 60 rows, not a third batch
 
 
 # ------------------------------------------------------------------ rewards
@@ -267,9 +267,82 @@ def test_policy_minibatches_of_sequence_batches_match_rllibs_iterator(n_seq, t, 
 
 def test_policy_minibatches_take_the_longest_policy_and_skip_empty_ones():
     short, long_ = SampleBatch({"x": np.arange(64)}), SampleBatch({"x": np.arange(200)})
-    batch = MultiAgentBatch(
-        {"a": short, "b": long_, "c": SampleBatch({"x": np.arange(0)}), DISC: long_}, 200
-    )
+    empty = SampleBatch({"x": np.arange(0)})
+    batch = MultiAgentBatch({DISC: long_, "a": short, "c": empty, "b": long_}, 200)
     assert policy_minibatches(batch, 2, 64) == 7  # ⌈2·200/64⌉ from "b"
     only_aux = MultiAgentBatch({DISC: long_, PROXY: long_}, 200)
     assert policy_minibatches(only_aux, 2, 64) == 0
+
+
+def test_chunks_map_each_episode_to_its_valid_rows_key_and_dynamics():
+    piece = learner()._asor_piece
+    eps = episodes(0, n=3, length=4)
+    eps[1].id_ = eps[1].id_ + "_7"  # RLlib's per-batch suffix on the learner's copy
+    # PPO's rows: an episode as the Learner connector extended it by one step holds its real
+    # steps (valid) and the bootstrap row (not valid): here 3 + 1 of each 4
+    valid = torch.tensor(([True] * 3 + [False]) * 3)
+    chunks = piece._chunks(eps, DEFAULT_MODULE_ID, valid)
+    assert [(c.start, c.stop, c.dynamics_id) for c in chunks] == [(0, 3, 0), (3, 6, 1), (6, 9, 2)]
+    assert [c.key for c in chunks] == [(e.id_.rsplit("_", 1)[0], e.agent_id) for e in eps]
+    assert chunks[1].key[0] == eps[1].id_[: -len("_7")]
+    # rows that do not match the episodes: no chunks (then no archive), never wrong ones
+    assert piece._chunks(eps, DEFAULT_MODULE_ID, valid[:-1]) is None
+    assert piece._chunks(eps, DEFAULT_MODULE_ID, torch.ones(12, dtype=torch.bool)) is None
+    assert piece._chunks(None, DEFAULT_MODULE_ID, valid) is None
+    assert piece._chunks(eps, "other_policy", valid) is None
+    no_ids = piece._chunks(episodes(0, n=2, length=4, ids=False), DEFAULT_MODULE_ID, valid[:8])
+    assert [c.dynamics_id for c in no_ids] == [0, 0]
+
+
+def test_gae_on_shared_values_equals_gae_with_its_own_critic_pass(monkeypatch):
+    """The critic runs once per batch (ASOR's pass); GAE's results are what a second pass
+    gives. Without ASOR's values (the piece skipped), GAE runs the critic itself."""
+    module_cls = type(learner().module[DEFAULT_MODULE_ID].unwrapped())
+    calls = []
+    real_values = module_cls.compute_values
+
+    def counted(self, batch, *args, **kwargs):
+        calls.append(len(batch[Columns.OBS]))
+        return real_values(self, batch, *args, **kwargs)
+
+    monkeypatch.setattr(module_cls, "compute_values", counted)
+    shared = module_batch(learner(preset="paper", lambda_=0.0), episodes(0))[DEFAULT_MODULE_ID]
+    assert calls == [66]  # one pass over the 60 steps + 6 bootstrap rows
+    calls.clear()
+    monkeypatch.setattr(
+        AsorRewardConnector, "__call__", lambda self, *, batch, **kw: batch
+    )  # no ASOR piece: no shared values
+    own = module_batch(learner(preset="paper", lambda_=0.0), episodes(0))[DEFAULT_MODULE_ID]
+    assert calls == [66]
+    for key in (Columns.ADVANTAGES, Columns.VALUE_TARGETS):
+        torch.testing.assert_close(shared[key], own[key])
+
+
+def test_the_lambda_schedule_follows_the_env_steps_sampled():
+    """λ = 0 at step 0 (and when the count is missing), 0.5 from step 1: the ASOR piece reads
+    the timesteps the Learner gets."""
+    lrn = learner(preset="paper", mode="srpo", lambda_=[[0, 0.0], [1, 0.5]])
+    for step, expect in ((None, 0.0), (0, 0.0), (1, 0.5), (5, 0.5)):
+        timesteps = {} if step is None else {NUM_ENV_STEPS_SAMPLED_LIFETIME: step}
+        results = lrn.update(
+            episodes=episodes(step or 0), timesteps=timesteps, minibatch_size=30, num_epochs=1
+        )
+        assert lift_asor_metrics(_flat(results))["lambda"] == pytest.approx(expect)
+
+
+def test_the_policy_gets_its_minibatches_when_the_discriminator_batch_is_longer(monkeypatch):
+    lrn = learner(lambda_warmup=False)  # robust: D_P from the archive, D_Q the whole batch
+    update(lrn, episodes(0))  # fills the archive
+    counted = []
+    real_loss = type(lrn).compute_loss_for_module
+
+    def spy(self, *, module_id, **kw):
+        counted.append(module_id)
+        return real_loss(self, module_id=module_id, **kw)
+
+    monkeypatch.setattr(type(lrn), "compute_loss_for_module", spy)
+    update(lrn, episodes(1), step=120)
+    disc_rows = lrn._asor_piece.aux_batch_sizes[DISC]
+    assert disc_rows > 66  # archive states + the whole batch
+    # 2 epochs of 66 rows in minibatches of 30: 5, as without ASOR
+    assert counted.count(DEFAULT_MODULE_ID) == 5

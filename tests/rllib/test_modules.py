@@ -10,13 +10,18 @@ from rllib_asor.asor.proxy import ProxyInputs
 from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 
 OBS = gym.spaces.Dict(
-    {"grid": gym.spaces.Box(0, 1, (2, 4, 4), np.float32), "vec": gym.spaces.Box(-1, 1, (5,), np.float32)}
+    {
+        "grid": gym.spaces.Box(0, 1, (2, 4, 4), np.float32),
+        "vec": gym.spaces.Box(-1, 1, (5,), np.float32),
+    }
 )
 ACT = gym.spaces.MultiDiscrete([3, 2])
 
 
 def build(cls, **asor):
-    return cls(observation_space=OBS, action_space=ACT, model_config={"asor": AsorConfig(**asor).to_dict()})
+    return cls(
+        observation_space=OBS, action_space=ACT, model_config={"asor": AsorConfig(**asor).to_dict()}
+    )
 
 
 def test_seeded_modules_are_reproducible_and_leave_the_global_rng_alone():
@@ -95,3 +100,46 @@ def test_discriminator_and_proxy_of_one_seed_start_from_different_weights():
     first = lambda m: next(m.parameters()).detach()  # noqa: E731
     assert torch.equal(first(proxy), first(again)) and not torch.equal(first(proxy), first(other))
     assert first(disc).shape != first(proxy).shape or not torch.equal(first(disc), first(proxy))
+
+
+def test_proxy_module_is_seeded_and_leaves_the_global_rng_alone():
+    torch.manual_seed(5)
+    expected_next = torch.rand(1)
+    torch.manual_seed(5)
+    a = build(AsorProxyModule, seed=7, obs_keys=["vec"])
+    b = build(AsorProxyModule, seed=7, obs_keys=["vec"])
+    assert torch.rand(1).item() == expected_next.item()
+    for pa, pb in zip(a.parameters(), b.parameters(), strict=True):
+        assert torch.equal(pa, pb)
+
+
+@pytest.mark.parametrize("smoothing", [0.0, 0.2])
+def test_discriminator_loss_uses_the_label_smoothing_and_regularises_real_rows(smoothing):
+    from ray.rllib.core.columns import Columns
+
+    from rllib_asor.asor.discriminator import discriminator_loss
+    from rllib_asor.rllib.modules import LABEL
+
+    module = build(
+        AsorDiscriminatorModule,
+        seed=0,
+        obs_keys=["vec"],
+        label_smoothing=smoothing,
+        disc_grad_penalty=1.0,
+        disc_logit_reg=0.1,
+    )
+    obs = torch.randn(10, 5)
+    labels = (torch.arange(10) % 2).float()
+    batch = {Columns.OBS: obs, LABEL: labels}
+    learner = _Learner()
+    loss = module.compute_self_supervised_loss(
+        learner=learner,
+        module_id="d",
+        config=None,
+        batch=batch,
+        fwd_out=module.forward_train(batch),
+    )
+    gan, _ = discriminator_loss(module.logits(obs), labels, smoothing)
+    reg, _ = module.disc.regularizer(obs[labels > 0.5], 1.0, 0.1)
+    torch.testing.assert_close(loss, gan + reg)
+    assert learner.metrics.logged[("d", "disc_loss")][1] == 1

@@ -19,6 +19,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 from ray.rllib.core.models.base import ENCODER_OUT
 
 import rllib_asor
+from rllib_asor.algorithms.escp.module import escp_state_values
 from rllib_asor.algorithms.sac.fast import fast_off_policy
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY, FlatTransitions
 from rllib_asor.asor.config import AsorConfig
@@ -35,11 +36,12 @@ DISC, PROXY = disc_module_id(DEFAULT_MODULE_ID), proxy_module_id(DEFAULT_MODULE_
 SMALL = {"disc_hiddens": [16], "rnd_hiddens": [16], "rnd_embedding_dim": 8, "seed": 0}
 
 
-def sac_learner(action_space: gym.Space = BOX, batch: int = 32, **asor):
+def sac_learner(action_space: gym.Space = BOX, batch: int = 32, gamma: float = 0.99, **asor):
     config = (
         SACConfig()
         .environment(observation_space=OBS, action_space=action_space)
         .training(
+            gamma=gamma,
             train_batch_size_per_learner=batch,
             replay_buffer_config={"type": "EpisodeReplayBuffer", "capacity": 1000},
         )
@@ -96,7 +98,7 @@ def test_sac_td_targets_see_the_bonus_of_the_discriminator_before_its_step(monke
     policy = params(learner.module[DEFAULT_MODULE_ID])
     disc = params(learner.module[DISC])
     proxy = params(learner.module[PROXY])
-    update(learner, cols)
+    results = update(learner, cols)
     assert len(seen) == 2  # 64 rows in minibatches of the train batch size (32)
     env_reward = {
         tuple(o): r for o, r in zip(cols[Columns.OBS], cols[Columns.REWARDS], strict=True)
@@ -108,7 +110,85 @@ def test_sac_td_targets_see_the_bonus_of_the_discriminator_before_its_step(monke
         torch.testing.assert_close(rewards, expected)
         assert (bonus < 0).all()
     assert changed(policy, learner.module[DEFAULT_MODULE_ID])
+    assert results[DISC]["lambda"].peek() == pytest.approx(0.5)  # ASOR's statistics reported
     assert changed(disc, learner.module[DISC]) and changed(proxy, learner.module[PROXY])
+
+
+def escp_learner(gamma: float, **asor):
+    """ESCP+ASOR's Learner in this process (its module reads windows of 4 steps)."""
+    config = (
+        rllib_asor.EscpConfig()
+        .environment(observation_space=OBS, action_space=BOX)
+        .training(
+            gamma=gamma,
+            train_batch_size_per_learner=32,
+            replay_buffer_config={"type": "EpisodeReplayBuffer", "capacity": 1000},
+        )
+        .escp(history_len=4, rmdm_min_replay=0)
+        .debugging(seed=0)
+    )
+    config = rllib_asor.with_asor(config, **(SMALL | asor))
+    spaces = {"__env__": (OBS, BOX), DEFAULT_MODULE_ID: (OBS, BOX)}
+    return config.build_learner(env=None, spaces=spaces)
+
+
+def escp_transitions(n: int = 64) -> dict[str, np.ndarray]:
+    from rllib_asor.algorithms.escp.replay import DYNAMICS_ID, NEXT_WINDOW, WINDOW
+
+    cols = transitions(n)
+    rng = np.random.default_rng(1)
+    cols[WINDOW] = rng.normal(size=(n, 4, 5)).astype(np.float32)
+    cols[NEXT_WINDOW] = rng.normal(size=(n, 4, 5)).astype(np.float32)
+    cols[DYNAMICS_ID] = (np.arange(n) % 3).astype(np.int64)
+    return cols
+
+
+@pytest.mark.parametrize("algo", ["sac", "escp"])
+def test_potential_shaping_uses_the_configs_gamma_and_the_critics_values(algo, monkeypatch):
+    """r + λ(γ·b(s′) − b(s)) with the algorithm's γ (0.5 here), b = log ω before the step; the
+    ranking's V(s) is the algorithm's own (soft-Q critics, ESCP's with z̄)."""
+    settings = {"preset": "paper", "lambda_": 0.5, "shaping": "potential"}
+    if algo == "sac":
+        learner, cols = sac_learner(gamma=0.5, **settings), transitions()
+    else:
+        learner, cols = escp_learner(0.5, **settings), escp_transitions()
+    module = learner.module[DEFAULT_MODULE_ID].unwrapped()
+    disc_before = copy.deepcopy(learner.module[DISC].unwrapped().state.disc)
+    seen, ranked = [], []
+    real_loss = type(learner).compute_loss_for_module
+
+    def spy(self, *, module_id, config, batch, fwd_out):
+        if module_id == DEFAULT_MODULE_ID:
+            seen.append(
+                {k: batch[k].clone() for k in (Columns.OBS, Columns.NEXT_OBS, Columns.REWARDS)}
+            )
+        return real_loss(self, module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
+
+    from rllib_asor.rllib import connector as connector_module
+
+    real_update = connector_module.asor_update
+
+    def update_spy(cfg, state, proxy, batch, rng):
+        ranked.append(batch.values.clone())
+        return real_update(cfg, state, proxy, batch, rng)
+
+    monkeypatch.setattr(type(learner), "compute_loss_for_module", spy)
+    monkeypatch.setattr(connector_module, "asor_update", update_spy)
+    tensors = {k: torch.from_numpy(v) for k, v in cols.items()}
+    with torch.no_grad():
+        value_fn = soft_q_state_values if algo == "sac" else escp_state_values
+        expected_values = value_fn(module, tensors)
+    update(learner, cols)
+    env_reward = {
+        tuple(o): r for o, r in zip(cols[Columns.OBS], cols[Columns.REWARDS], strict=True)
+    }
+    b = seen[0]
+    with torch.no_grad():
+        bonus = reward_bonus(disc_before(b[Columns.OBS]), "log", -5.0)
+        next_bonus = reward_bonus(disc_before(b[Columns.NEXT_OBS]), "log", -5.0)
+    env = torch.tensor([env_reward[tuple(o)] for o in b[Columns.OBS].numpy()])
+    torch.testing.assert_close(b[Columns.REWARDS], env + 0.5 * (0.5 * next_bonus - bonus))
+    torch.testing.assert_close(ranked[0], expected_values)
 
 
 def test_aux_modules_take_one_minibatch_per_call_unless_aux_epochs_is_set(monkeypatch):
@@ -355,6 +435,7 @@ def test_cql_lambda_schedule_follows_the_dataset_rows_trained_on(monkeypatch):
     torch.testing.assert_close(seen[0], torch.from_numpy(cols[Columns.REWARDS]))
     assert (seen[1] < torch.from_numpy(cols[Columns.REWARDS])).all()
     assert learner._asor_offline_rows == 64
+    assert learner._asor_timestep == 32.0
 
 
 # ------------------------------------------------------------------ MAPLE's Learner
