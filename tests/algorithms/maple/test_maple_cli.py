@@ -46,9 +46,12 @@ def test_maple_block_needs_run_maple_or_mopo(tmp_path, capsys):
     assert rc == 2 and "needs run: MAPLE or MOPO" in err and "x.config.maple" in err
 
 
-def test_a_real_run_without_data_fails_before_ray_naming_make_datasets(capsys):
+def test_a_real_run_without_data_fails_before_ray_naming_make_datasets(
+    capsys, tmp_path, monkeypatch
+):
     import ray
 
+    monkeypatch.chdir(tmp_path)  # no data/offline/ here, whether or not the checkout has it
     was_up = ray.is_initialized()
     rc, err = _err(capsys, ["train", "file", str(EXAMPLES / "maple-hopper.yaml")])
     assert rc == 2 and "make datasets" in err and "maple-hopper.config.input" in err
