@@ -163,8 +163,9 @@ def run_one(dataset: str, method: str, seed: int, args: argparse.Namespace) -> d
         for i in range(args.iters):
             last = algo.train()
             ev = last.get("evaluation", {})
-            if "mean/normalized_score" in ev:
-                curve.append({"iteration": i + 1, "score": float(ev["mean/normalized_score"])})
+            score = float(ev.get("mean/normalized_score", float("nan")))
+            if np.isfinite(score):  # iterations without an evaluation report NaN
+                curve.append({"iteration": i + 1, "score": score})
             print(
                 f"  {dataset}/{method}/{seed} iter {i + 1}/{args.iters} "
                 f"t={time.time() - t0:.0f}s {curve[-1] if curve else ''}",
