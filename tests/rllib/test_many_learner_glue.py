@@ -24,6 +24,22 @@ SETTINGS = {
 }
 
 
+def run_two_ranks(target, tmp_path: Path, *args) -> list[dict]:
+    """`target(rank, store, out, *args)` in two spawned processes (one gloo group); what each
+    saved to `out/<rank>.pt`."""
+    ctx = mp.get_context("spawn")
+    procs = [
+        ctx.Process(target=target, args=(r, str(tmp_path / "store"), str(tmp_path), *args))
+        for r in range(2)
+    ]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(timeout=300)
+    assert [p.exitcode for p in procs] == [0, 0]
+    return [torch.load(tmp_path / f"{r}.pt") for r in range(2)]
+
+
 def _pieces(batch: dict) -> dict[str, torch.Tensor]:
     out = {
         "rewards": batch[DEFAULT_MODULE_ID][Columns.REWARDS].clone(),
@@ -50,17 +66,7 @@ def _rank(rank: int, store: str, out: str, settings: dict) -> None:
 @pytest.mark.parametrize("name", sorted(SETTINGS))
 def test_two_learners_get_what_one_learner_computes_on_both_batches(name, tmp_path):
     settings = SETTINGS[name]
-    ctx = mp.get_context("spawn")
-    procs = [
-        ctx.Process(target=_rank, args=(r, str(tmp_path / "store"), str(tmp_path), settings))
-        for r in range(2)
-    ]
-    for p in procs:
-        p.start()
-    for p in procs:
-        p.join(timeout=300)
-    assert [p.exitcode for p in procs] == [0, 0]
-    ranks = [torch.load(tmp_path / f"{r}.pt") for r in range(2)]
+    ranks = run_two_ranks(_rank, tmp_path, settings)
 
     one = learner(**settings)
     for call, seeds in (("first", (10, 11)), ("second", (20, 21))):
@@ -126,17 +132,7 @@ def test_two_maple_learners_rank_all_real_states_and_keep_their_own_bonus(tmp_pa
 
     from tests.rllib.test_soft_q_glue import maple_batch, maple_learner
 
-    ctx = mp.get_context("spawn")
-    procs = [
-        ctx.Process(target=_maple_rank, args=(r, str(tmp_path / "s"), str(tmp_path)))
-        for r in (0, 1)
-    ]
-    for p in procs:
-        p.start()
-    for p in procs:
-        p.join(timeout=300)
-    assert [p.exitcode for p in procs] == [0, 0]
-    ranks = [torch.load(tmp_path / f"{r}.pt") for r in range(2)]
+    ranks = run_two_ranks(_maple_rank, tmp_path)
 
     one = maple_learner(preset="paper", lambda_=0.1)
     cols = [maple_batch(one, seed=r)[0] for r in (0, 1)]
