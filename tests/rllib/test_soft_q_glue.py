@@ -430,7 +430,8 @@ def test_cql_lambda_schedule_follows_the_dataset_rows_trained_on(monkeypatch):
     timesteps = {"num_env_steps_sampled_lifetime": 0}
     for _ in range(2):
         batch = MultiAgentBatch({DEFAULT_MODULE_ID: SampleBatch(dict(cols))}, env_steps=32)
-        learner.update(batch=batch, timesteps=timesteps)
+        results = learner.update(batch=batch, timesteps=timesteps)
+    assert results[DISC]["lambda"].peek() == pytest.approx(1.0)  # ASOR's statistics reported
     assert len(seen) == 2
     torch.testing.assert_close(seen[0], torch.from_numpy(cols[Columns.REWARDS]))
     assert (seen[1] < torch.from_numpy(cols[Columns.REWARDS])).all()
