@@ -6,9 +6,9 @@
 
 For each package: the working tree (tracked and untracked-but-not-ignored files) is copied to
 build/mutation/<package>/, the package's [tool.mutmut] settings are appended to that copy's
-pyproject.toml, and `mutmut run` is started there under `nice -n 19` (`--nice`; so mutmut's `mutants/`
-sandbox never appears in the checkout, and a second run reuses the first one's results for
-every function whose source and tests did not change). Then the kill ratio is computed:
+pyproject.toml, and `mutmut run` is started there under `nice -n 19` (or `--nice N`), so
+mutmut's `mutants/` sandbox never appears in the checkout, and a second run reuses the first
+one's results for every function whose source and tests did not change. Then the kill ratio is computed:
 
     killed / (mutants − equivalent)       killed includes timeouts; "no tests" counts as survived
 
