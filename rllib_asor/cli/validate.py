@@ -106,7 +106,6 @@ def validate_escp(exp: Experiment) -> None:
 def validate_env(exp: Experiment) -> None:
     """The env must resolve (`registry.env_names`: ids, `module:EnvId`, class paths, old gym
     ids) and build with each `env_config` candidate; an old id is replaced by its new one."""
-
     from rllib_asor.registry import env_names
 
     with quiet():

@@ -82,19 +82,26 @@ def changed(before: dict, module) -> bool:
     return any(not torch.equal(before[k], v) for k, v in module.state_dict().items())
 
 
-def test_sac_td_targets_see_the_bonus_of_the_discriminator_before_its_step(monkeypatch):
-    learner = sac_learner(preset="paper", lambda_=0.5)
-    cols = transitions()
-    disc_before = copy.deepcopy(learner.module[DISC].unwrapped().state.disc)
-    seen = []
+def policy_batches_seen(monkeypatch, learner) -> list[dict[str, torch.Tensor]]:
+    """Record what the policy's loss gets: OBS, NEXT_OBS (when there) and REWARDS per call."""
+    seen: list[dict[str, torch.Tensor]] = []
     real = type(learner).compute_loss_for_module
 
     def spy(self, *, module_id, config, batch, fwd_out):
         if module_id == DEFAULT_MODULE_ID:
-            seen.append((batch[Columns.OBS].clone(), batch[Columns.REWARDS].clone()))
+            keys = (Columns.OBS, Columns.NEXT_OBS, Columns.REWARDS)
+            seen.append({k: batch[k].clone() for k in keys if k in batch})
         return real(self, module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
 
     monkeypatch.setattr(type(learner), "compute_loss_for_module", spy)
+    return seen
+
+
+def test_sac_td_targets_see_the_bonus_of_the_discriminator_before_its_step(monkeypatch):
+    learner = sac_learner(preset="paper", lambda_=0.5)
+    cols = transitions()
+    disc_before = copy.deepcopy(learner.module[DISC].unwrapped().state.disc)
+    seen = policy_batches_seen(monkeypatch, learner)
     policy = params(learner.module[DEFAULT_MODULE_ID])
     disc = params(learner.module[DISC])
     proxy = params(learner.module[PROXY])
@@ -103,7 +110,8 @@ def test_sac_td_targets_see_the_bonus_of_the_discriminator_before_its_step(monke
     env_reward = {
         tuple(o): r for o, r in zip(cols[Columns.OBS], cols[Columns.REWARDS], strict=True)
     }
-    for obs, rewards in seen:
+    for b in seen:
+        obs, rewards = b[Columns.OBS], b[Columns.REWARDS]
         with torch.no_grad():
             bonus = 0.5 * reward_bonus(disc_before(obs), "log", -5.0)
         expected = torch.tensor([env_reward[tuple(o)] for o in obs.numpy()]) + bonus
@@ -154,16 +162,7 @@ def test_potential_shaping_uses_the_configs_gamma_and_the_critics_values(algo, m
         learner, cols = escp_learner(0.5, **settings), escp_transitions()
     module = learner.module[DEFAULT_MODULE_ID].unwrapped()
     disc_before = copy.deepcopy(learner.module[DISC].unwrapped().state.disc)
-    seen, ranked = [], []
-    real_loss = type(learner).compute_loss_for_module
-
-    def spy(self, *, module_id, config, batch, fwd_out):
-        if module_id == DEFAULT_MODULE_ID:
-            seen.append(
-                {k: batch[k].clone() for k in (Columns.OBS, Columns.NEXT_OBS, Columns.REWARDS)}
-            )
-        return real_loss(self, module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
-
+    seen, ranked = policy_batches_seen(monkeypatch, learner), []
     from rllib_asor.rllib import connector as connector_module
 
     real_update = connector_module.asor_update
@@ -172,7 +171,6 @@ def test_potential_shaping_uses_the_configs_gamma_and_the_critics_values(algo, m
         ranked.append(batch.values.clone())
         return real_update(cfg, state, proxy, batch, rng)
 
-    monkeypatch.setattr(type(learner), "compute_loss_for_module", spy)
     monkeypatch.setattr(connector_module, "asor_update", update_spy)
     tensors = {k: torch.from_numpy(v) for k, v in cols.items()}
     with torch.no_grad():
@@ -415,15 +413,7 @@ def test_cql_lambda_schedule_follows_the_dataset_rows_trained_on(monkeypatch):
 
     # λ is 0 until 32 rows were trained on, then 1 (paper form: b = log ω < 0)
     learner = cql_learner(preset="paper", lambda_=[[0, 0.0], [31, 0.0], [32, 1.0]])
-    seen = []
-    real = type(learner).compute_loss_for_module
-
-    def spy(self, *, module_id, config, batch, fwd_out):
-        if module_id == DEFAULT_MODULE_ID:
-            seen.append(batch[Columns.REWARDS].clone())
-        return real(self, module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
-
-    monkeypatch.setattr(type(learner), "compute_loss_for_module", spy)
+    seen = policy_batches_seen(monkeypatch, learner)
     cols = transitions(32)
     cols["weights"] = np.ones(32, np.float32)
     cols["n_step"] = np.ones(32, np.int64)
@@ -433,8 +423,9 @@ def test_cql_lambda_schedule_follows_the_dataset_rows_trained_on(monkeypatch):
         results = learner.update(batch=batch, timesteps=timesteps)
     assert results[DISC]["lambda"].peek() == pytest.approx(1.0)  # ASOR's statistics reported
     assert len(seen) == 2
-    torch.testing.assert_close(seen[0], torch.from_numpy(cols[Columns.REWARDS]))
-    assert (seen[1] < torch.from_numpy(cols[Columns.REWARDS])).all()
+    env = torch.from_numpy(cols[Columns.REWARDS])
+    torch.testing.assert_close(seen[0][Columns.REWARDS], env)
+    assert (seen[1][Columns.REWARDS] < env).all()
     assert learner._asor_offline_rows == 64
     assert learner._asor_timestep == 32.0
 
