@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 import torch
 from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.connectors.common import AddObservationsFromEpisodesToBatch
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
+from ray.rllib.env.multi_agent_episode import MultiAgentEpisode
 from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
@@ -20,13 +22,14 @@ from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 import rllib_asor
 from rllib_asor.asor.reward import reward_bonus
 from rllib_asor.rllib.callbacks import lift_asor_metrics
-from rllib_asor.rllib.connector import AsorRewardConnector, SharedValuesGAE
+from rllib_asor.rllib.connector import AddDynamicsIdsToBatch, AsorRewardConnector, SharedValuesGAE
 from rllib_asor.rllib.learners import (
     disc_module_id,
     is_aux_module,
     policy_minibatches,
     proxy_module_id,
 )
+from rllib_asor.rllib.modules import DYNAMICS_ID
 from tests.asor.test_state_behaviour import pieces
 
 OBS = gym.spaces.Box(-10, 10, (3,), np.float32)
@@ -219,6 +222,44 @@ def test_rnd_per_dynamics_reads_the_dynamics_ids_of_the_episodes():
     assert lrn.module[PROXY].proxy.rnd.seen.tolist() == [1.0, 1.0, 1.0, 0.0]
     with pytest.raises(ValueError, match="dynamics_id"):
         update(lrn, episodes(1, ids=False))
+
+
+def test_dynamics_ids_cover_agents_that_did_not_step_last():
+    """Multi-agent: every agent's rows get their ids, also an agent absent from the last step
+    (RLlib's iterator would skip it by default, and its OBS rows would have no ids)."""
+    both, o = ("a", "b"), lambda: np.zeros(3, np.float32)  # noqa: E731
+    ep = MultiAgentEpisode()
+    ep.add_env_reset(
+        observations={x: o() for x in both},
+        infos={"a": {"dynamics_id": 1}, "b": {"dynamics_id": 2}},
+    )
+    ep.add_env_step(
+        observations={x: o() for x in both},
+        actions={x: 0 for x in both},
+        rewards={x: 0.0 for x in both},
+        infos={"a": {"dynamics_id": 1}, "b": {"dynamics_id": 2}},
+        terminateds={"b": True, "__all__": False},
+        truncateds={"__all__": False},
+    )
+    ep.add_env_step(  # only "a" steps last
+        observations={"a": o()},
+        actions={"a": 0},
+        rewards={"a": 0.0},
+        infos={"a": {"dynamics_id": 1}},
+        terminateds={"__all__": False},
+        truncateds={"__all__": False},
+    )
+    assert ep.get_agents_that_stepped() == {"a"}
+    batch: dict = {}
+    batch = AddObservationsFromEpisodesToBatch(as_learner_connector=True)(
+        rl_module=None, batch=batch, episodes=[ep]
+    )
+    batch = AddDynamicsIdsToBatch()(rl_module=None, batch=batch, episodes=[ep])
+    # columns map (episode id, agent id, module id) to that agent's rows
+    ids = {key[1]: rows for key, rows in batch[DYNAMICS_ID].items()}
+    obs = {key[1]: len(rows) for key, rows in batch[Columns.OBS].items()}
+    assert ids == {"a": [1, 1], "b": [2]}
+    assert {agent: len(rows) for agent, rows in ids.items()} == obs
 
 
 # ------------------------------------------------------------------ checkpoints
