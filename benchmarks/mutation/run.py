@@ -106,8 +106,13 @@ def run_mutmut(dest: Path, children: int, names: list[str], nice: int = 19) -> i
     mutmut = Path(sys.executable).with_name("mutmut")
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0")
     cmd = ["nice", "-n", str(nice), str(mutmut), "run", "--max-children", str(children), *names]
-    print("+", " ".join(cmd[:8]), f"(+{len(names)} mutant names)" if names else "", f"(in {dest})",
-          flush=True)
+    print(
+        "+",
+        " ".join(cmd[:8]),
+        f"(+{len(names)} mutant names)" if names else "",
+        f"(in {dest})",
+        flush=True,
+    )
     return subprocess.run(cmd, cwd=dest, env=env).returncode
 
 
@@ -157,6 +162,18 @@ def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> d
     }
 
 
+def forget_verdicts(dest: Path, mutants: set[str]) -> None:
+    """Mark these mutants untested, so that mutmut's next run tests them again and keeps every
+    other verdict (naming mutants on mutmut's command line instead drops the others' verdicts)."""
+    for meta in (dest / "mutants").rglob("*.py.meta"):
+        data = json.loads(meta.read_text())
+        codes = data["exit_code_by_key"]
+        hit = mutants.intersection(codes)
+        if hit:
+            codes.update(dict.fromkeys(hit))
+            meta.write_text(json.dumps(data))
+
+
 def main(argv: list[str] | None = None) -> int:
     defaults, packages = load_packages()
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -170,7 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--rerun-open",
         action="store_true",
-        help="test again the survivors and untested mutants of the last run (after new tests)",
+        help="test the last run's open survivors again (after new tests); untested mutants "
+        "are always tested",
     )
     args = ap.parse_args(argv)
     names = args.packages or list(packages)
@@ -186,11 +204,10 @@ def main(argv: list[str] | None = None) -> int:
             dest.mkdir(parents=True, exist_ok=True)
             sync_tree(dest)
             write_config(dest, defaults, pkg)
-            names = list(pkg.get("mutants", []))
             if args.rerun_open and (dest / "mutants").exists():
                 last = summarise(name, dest, pkg, equivalent.get(name, {}))
-                names = last["open_survivors"] + last["not_checked_mutants"] or names
-            rc = run_mutmut(dest, args.children, names, args.nice)
+                forget_verdicts(dest, set(last["open_survivors"]))
+            rc = run_mutmut(dest, args.children, list(pkg.get("mutants", [])), args.nice)
             if rc != 0:
                 print(f"mutmut run for {name} exited {rc}", file=sys.stderr)
                 ok = False
@@ -216,8 +233,10 @@ def main(argv: list[str] | None = None) -> int:
     for group, members in sorted(groups.items()):
         killed = sum(s["killed"] for s in members)
         scored = sum(s["mutants"] - s["equivalent"] for s in members)
-        print(f"group {group} ({', '.join(s['package'] for s in members)}): "
-              f"{killed}/{scored} = {killed / max(scored, 1):.1%}")
+        print(
+            f"group {group} ({', '.join(s['package'] for s in members)}): "
+            f"{killed}/{scored} = {killed / max(scored, 1):.1%}"
+        )
     return 0 if ok or not args.check else 1
 
 
