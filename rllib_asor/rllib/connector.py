@@ -202,9 +202,7 @@ class AsorRewardConnector(ConnectorV2):
                 own_delta = result.reward_delta[offset : offset + built[0].features.shape[0]]
             disc_feats = even_share(result.disc_features, rank, size)
             disc_labels = even_share(result.disc_labels, rank, size)
-            proxy_in = even_share_inputs(
-                whole.proxy_inputs or ProxyInputs(whole.features), rank, size
-            )
+            proxy_in = even_share_inputs(whole.proxy_inputs, rank, size)
 
         if built is not None:
             self._add_to_rewards(batch[policy_id], policy_id, built[1], own_delta)

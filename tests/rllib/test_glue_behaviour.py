@@ -13,10 +13,14 @@ import torch
 from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.connectors.common import AddObservationsFromEpisodesToBatch
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
+from ray.rllib.core.rl_module.apis import ValueFunctionAPI
+from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+from ray.rllib.core.rl_module.torch import TorchRLModule
 from ray.rllib.env.multi_agent_episode import MultiAgentEpisode
 from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
+from ray.rllib.utils.metrics.metrics_logger import MetricsLogger
 from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
 import rllib_asor
@@ -80,11 +84,11 @@ def episodes(seed: int, n: int = 6, length: int = 10, terminated: bool = True, i
     return out
 
 
-def update(lrn, eps, step=60):
+def update(lrn, eps, step=60, minibatch_size=30):
     return lrn.update(
         episodes=eps,
         timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: step},
-        minibatch_size=30,
+        minibatch_size=minibatch_size,
         num_epochs=2,
     )
 
@@ -224,24 +228,114 @@ def test_rnd_per_dynamics_reads_the_dynamics_ids_of_the_episodes():
         update(lrn, episodes(1, ids=False))
 
 
-def test_dynamics_ids_cover_agents_that_did_not_step_last():
-    """Multi-agent: every agent's rows get their ids, also an agent absent from the last step
-    (RLlib's iterator would skip it by default, and its OBS rows would have no ids)."""
-    both, o = ("a", "b"), lambda: np.zeros(3, np.float32)  # noqa: E731
-    ep = MultiAgentEpisode()
+@pytest.mark.parametrize("proxy", ["rnd", "ensemble"])
+def test_proxies_other_than_per_dynamics_need_no_dynamics_ids(proxy):
+    lrn = learner(proxy=proxy)
+    update(lrn, episodes(0, ids=False))
+    assert lrn._asor_rows_trained[PROXY] == 60
+
+
+def test_a_nan_observation_fails_with_a_clear_error():
+    eps = episodes(0)
+    eps[2].observations[3][1] = np.nan
+    with pytest.raises(ValueError, match=r"1 observation\(s\) of policy 'default_policy' .*NaN"):
+        module_batch(learner(), eps)
+
+
+def test_the_connector_logs_the_last_updates_metrics_and_runs_without_a_logger(monkeypatch):
+    from rllib_asor.rllib import connector
+
+    seen, real = [], connector.asor_update
+
+    def spy(*args, **kwargs):
+        seen.append(real(*args, **kwargs))
+        return seen[-1]
+
+    monkeypatch.setattr(connector, "asor_update", spy)
+    lrn, logger = learner(lambda_warmup=False), MetricsLogger()
+    for seed in range(3):
+        lrn._learner_connector(
+            rl_module=lrn.module, batch={}, episodes=episodes(seed), metrics=logger
+        )
+    last = {k: float(v) for k, v in seen[-1].metrics.items()}
+    assert len(last) > 3 and {k: logger.peek((DISC, k)) for k in last} == pytest.approx(last)
+    batch = lrn._learner_connector(rl_module=lrn.module, batch={}, episodes=episodes(3))
+    assert torch.isfinite(batch[DEFAULT_MODULE_ID][Columns.REWARDS]).all()
+
+
+class DictObsPolicy(TorchRLModule, ValueFunctionAPI):
+    """A linear policy and critic on every key of a Dict observation (PPO's default module
+    takes Box observations only)."""
+
+    def setup(self):
+        width = sum(s.shape[0] for s in self.observation_space.spaces.values())
+        self.pi = torch.nn.Linear(width, self.action_space.n)
+        self.vf = torch.nn.Linear(width, 1)
+
+    def _inputs(self, batch):
+        return torch.cat([batch[Columns.OBS][k].float() for k in sorted(batch[Columns.OBS])], -1)
+
+    def _forward(self, batch, **kwargs):
+        return {Columns.ACTION_DIST_INPUTS: self.pi(self._inputs(batch))}
+
+    def compute_values(self, batch, embeddings=None):
+        return self.vf(self._inputs(batch)).squeeze(-1)
+
+
+def test_obs_keys_give_the_aux_modules_only_those_keys():
+    space = gym.spaces.Dict({"noise": gym.spaces.Box(-10, 10, (2,)), "pos": OBS})
+    config = (
+        PPOConfig()
+        .environment(observation_space=space, action_space=ACT)
+        .training(train_batch_size=60, minibatch_size=30, num_epochs=1)
+        .rl_module(rl_module_spec=RLModuleSpec(module_class=DictObsPolicy))
+    )
+    config = rllib_asor.with_asor(config, **(SMALL | {"obs_keys": ["pos"]}))
+    lrn = config.build_learner(
+        env=None, spaces={"__env__": (space, ACT), DEFAULT_MODULE_ID: (space, ACT)}
+    )
+    eps = []
+    for ep in episodes(0):  # the same states as "pos", a 100 times larger "noise" beside them
+        obs = ep.get_observations()
+        noisy = SingleAgentEpisode(observation_space=space, action_space=ACT)
+        noisy.add_env_reset(observation={"noise": 100 + obs[0][:2], "pos": obs[0]}, infos={})
+        for t in range(len(ep)):
+            noisy.add_env_step(
+                observation={"noise": 100 + obs[t + 1][:2], "pos": obs[t + 1]},
+                action=ep.get_actions(t),
+                reward=ep.get_rewards(t),
+                terminated=ep.is_terminated and t == len(ep) - 1,
+                extra_model_outputs={
+                    k: ep.get_extra_model_outputs(k, t)
+                    for k in (Columns.ACTION_LOGP, Columns.ACTION_DIST_INPUTS)
+                },
+            )
+        eps.append(noisy.to_numpy())
+    batch = module_batch(lrn, eps)
+    states = torch.as_tensor(np.concatenate([e.get_observations()[:-1] for e in episodes(0)]))
+    torch.testing.assert_close(batch[PROXY][Columns.OBS], states)
+    assert batch[DISC][Columns.OBS].shape[1] == 3 and batch[DISC][Columns.OBS].abs().max() < 10
+
+
+def two_agent_episode() -> MultiAgentEpisode:
+    """Agents "a" (3 steps, dynamics 1; its reset reports 4) and "b" (2 steps, then done,
+    dynamics 2), each on its own module "pol_<agent>"; only "a" acts in the last step."""
+    o = lambda: np.zeros(3, np.float32)  # noqa: E731
+    ep = MultiAgentEpisode(agent_to_module_mapping_fn=lambda agent, episode: f"pol_{agent}")
     ep.add_env_reset(
-        observations={x: o() for x in both},
-        infos={"a": {"dynamics_id": 1}, "b": {"dynamics_id": 2}},
+        observations={"a": o(), "b": o()},
+        infos={"a": {"dynamics_id": 4}, "b": {"dynamics_id": 2}},
     )
+    for t in range(2):
+        ep.add_env_step(
+            observations={"a": o(), "b": o()},
+            actions={"a": 0, "b": 0},
+            rewards={"a": 0.0, "b": 0.0},
+            infos={"a": {"dynamics_id": 1}, "b": {"dynamics_id": 2}},
+            terminateds={"b": t == 1, "__all__": False},
+            truncateds={"__all__": False},
+        )
     ep.add_env_step(
-        observations={x: o() for x in both},
-        actions={x: 0 for x in both},
-        rewards={x: 0.0 for x in both},
-        infos={"a": {"dynamics_id": 1}, "b": {"dynamics_id": 2}},
-        terminateds={"b": True, "__all__": False},
-        truncateds={"__all__": False},
-    )
-    ep.add_env_step(  # only "a" steps last
         observations={"a": o()},
         actions={"a": 0},
         rewards={"a": 0.0},
@@ -250,6 +344,13 @@ def test_dynamics_ids_cover_agents_that_did_not_step_last():
         truncateds={"__all__": False},
     )
     assert ep.get_agents_that_stepped() == {"a"}
+    return ep
+
+
+def test_dynamics_ids_cover_agents_that_did_not_step_last():
+    """Multi-agent: every agent's rows get their ids, also an agent absent from the last step
+    (RLlib's iterator would skip it by default, and its OBS rows would have no ids)."""
+    ep = two_agent_episode()
     batch: dict = {}
     batch = AddObservationsFromEpisodesToBatch(as_learner_connector=True)(
         rl_module=None, batch=batch, episodes=[ep]
@@ -258,7 +359,7 @@ def test_dynamics_ids_cover_agents_that_did_not_step_last():
     # columns map (episode id, agent id, module id) to that agent's rows
     ids = {key[1]: rows for key, rows in batch[DYNAMICS_ID].items()}
     obs = {key[1]: len(rows) for key, rows in batch[Columns.OBS].items()}
-    assert ids == {"a": [1, 1], "b": [2]}
+    assert ids == {"a": [4, 1, 1], "b": [2, 2]}
     assert {agent: len(rows) for agent, rows in ids.items()} == obs
 
 
@@ -335,6 +436,17 @@ def test_chunks_map_each_episode_to_its_valid_rows_key_and_dynamics():
     assert [c.dynamics_id for c in no_ids] == [0, 0]
 
 
+def test_chunks_of_a_multi_agent_episode_per_module_with_the_first_states_dynamics():
+    """Each module gets its agents' chunks, also those of an agent that did not act in the last
+    step; a chunk's dynamics id is the one at its first state (the reset's)."""
+    piece, ep = learner()._asor_piece, two_agent_episode()
+    # as in PPO's batch, each episode's last row is its bootstrap row (not valid)
+    a = piece._chunks([ep], "pol_a", torch.tensor([True, True, False]))
+    b = piece._chunks([ep], "pol_b", torch.tensor([True, False]))
+    assert [(c.key[1], c.start, c.stop, c.dynamics_id) for c in a] == [("a", 0, 2, 4)]
+    assert [(c.key[1], c.start, c.stop, c.dynamics_id) for c in b] == [("b", 0, 1, 2)]
+
+
 def test_gae_on_shared_values_equals_gae_with_its_own_critic_pass(monkeypatch):
     """The critic runs once per batch (ASOR's pass); GAE's results are what a second pass
     gives. Without ASOR's values (the piece skipped), GAE runs the critic itself."""
@@ -371,8 +483,12 @@ def test_the_lambda_schedule_follows_the_env_steps_sampled():
         assert lift_asor_metrics(_flat(results))["lambda"] == pytest.approx(expect)
 
 
-def test_the_policy_gets_its_minibatches_when_the_discriminator_batch_is_longer(monkeypatch):
-    lrn = learner(lambda_warmup=False)  # robust: D_P from the archive, D_Q the whole batch
+@pytest.mark.parametrize("aux_epochs", [None, 3])  # 3: the aux modules outlast the policy
+def test_the_policy_gets_its_minibatches_when_the_discriminator_batch_is_longer(
+    monkeypatch, aux_epochs
+):
+    # robust: D_P from the archive, D_Q the whole batch
+    lrn = learner(lambda_warmup=False, aux_epochs=aux_epochs)
     update(lrn, episodes(0))  # fills the archive
     counted = []
     real_loss = type(lrn).compute_loss_for_module
@@ -382,8 +498,9 @@ def test_the_policy_gets_its_minibatches_when_the_discriminator_batch_is_longer(
         return real_loss(self, module_id=module_id, **kw)
 
     monkeypatch.setattr(type(lrn), "compute_loss_for_module", spy)
-    update(lrn, episodes(1), step=120)
+    update(lrn, episodes(1), step=120, minibatch_size=10)
     disc_rows = lrn._asor_piece.aux_batch_sizes[DISC]
     assert disc_rows > 66  # archive states + the whole batch
-    # 2 epochs of 66 rows in minibatches of 30: 5, as without ASOR
-    assert counted.count(DEFAULT_MODULE_ID) == 5
+    # 2 epochs of 66 rows in minibatches of 10: 14, as without ASOR (2 epochs of the
+    # discriminator's rows would be more)
+    assert counted.count(DEFAULT_MODULE_ID) == 14

@@ -7,6 +7,7 @@ real states of both ranks ranked together (rllib_asor/rllib/maple_asor.py)."""
 from __future__ import annotations
 
 import multiprocessing as mp
+from datetime import timedelta
 from pathlib import Path
 
 import pytest
@@ -19,9 +20,11 @@ from tests.rllib.test_glue_behaviour import DISC, PROXY, episodes, learner, modu
 
 SETTINGS = {
     "paper": {"preset": "paper", "lambda_": 0.3},
-    "robust": {"lambda_warmup": False, "lambda_": 0.3},
+    # the ensemble proxy: its batches carry actions and s′ besides the states
+    "robust": {"lambda_warmup": False, "lambda_": 0.3, "proxy": "ensemble"},
     "srpo": {"mode": "srpo", "preset": "paper", "lambda_": 0.3},
 }
+CALLS = {"first": (10, 11), "second": (20, 21)}  # the episodes' seeds on rank 0 and rank 1
 
 
 def run_two_ranks(target, tmp_path: Path, *args) -> list[dict]:
@@ -41,24 +44,26 @@ def run_two_ranks(target, tmp_path: Path, *args) -> list[dict]:
 
 
 def _pieces(batch: dict) -> dict[str, torch.Tensor]:
-    out = {
-        "rewards": batch[DEFAULT_MODULE_ID][Columns.REWARDS].clone(),
-        "disc_obs": batch[DISC][Columns.OBS].clone(),
-        "disc_labels": batch[DISC]["asor_label"].clone(),
-    }
-    if PROXY in batch:
-        out["proxy_obs"] = batch[PROXY][Columns.OBS].clone()
-    return out
+    out = {f"disc_{k}": v.clone() for k, v in batch[DISC].items()}
+    out |= {f"proxy_{k}": v.clone() for k, v in batch.get(PROXY, {}).items()}
+    return out | {"rewards": batch[DEFAULT_MODULE_ID][Columns.REWARDS].clone()}
 
 
 def _rank(rank: int, store: str, out: str, settings: dict) -> None:
     torch.set_num_threads(1)
-    dist.init_process_group("gloo", init_method=f"file://{store}", rank=rank, world_size=2)
+    dist.init_process_group(  # a Learner left out of a collective fails fast, not hangs
+        "gloo",
+        init_method=f"file://{store}",
+        rank=rank,
+        world_size=2,
+        timeout=timedelta(seconds=60),
+    )
     try:
         lrn = learner(**settings)
-        first = _pieces(module_batch(lrn, episodes(10 + rank)))
-        second = _pieces(module_batch(lrn, episodes(20 + rank)))  # ASOR state carried over
-        torch.save({"first": first, "second": second}, Path(out) / f"{rank}.pt")
+        pieces = {}
+        for call, seeds in CALLS.items():  # ASOR's state carries over from call to call
+            pieces[call] = _pieces(module_batch(lrn, episodes(seeds[rank])))
+        torch.save(pieces, Path(out) / f"{rank}.pt")
     finally:
         dist.destroy_process_group()
 
@@ -69,19 +74,21 @@ def test_two_learners_get_what_one_learner_computes_on_both_batches(name, tmp_pa
     ranks = run_two_ranks(_rank, tmp_path, settings)
 
     one = learner(**settings)
-    for call, seeds in (("first", (10, 11)), ("second", (20, 21))):
+    for call, seeds in CALLS.items():
         whole = _pieces(module_batch(one, episodes(seeds[0]) + episodes(seeds[1])))
         parts = [r[call] for r in ranks]
         # each rank's rows get the bonus one Learner gives them (rank 0's rows come first)
         n0 = parts[0]["rewards"].shape[0]
         torch.testing.assert_close(parts[0]["rewards"], whole["rewards"][:n0])
         torch.testing.assert_close(parts[1]["rewards"], whole["rewards"][n0:])
-        # the aux batches: an equal share each of the one-Learner batch
-        for key in ("disc_obs", "disc_labels", "proxy_obs"):
-            assert (key in whole) == (key in parts[0]) == (key in parts[1])
-            if key in whole:
-                for r in range(2):
-                    torch.testing.assert_close(parts[r][key], even_share(whole[key], r, 2))
+        # the aux batches, every column: an equal share each of the one-Learner batch
+        aux = sorted(k for k in whole if k != "rewards")
+        if settings.get("proxy") == "ensemble":  # its batches carry s′ besides s
+            assert f"proxy_{Columns.NEXT_OBS}" in aux
+        for r in range(2):
+            assert sorted(k for k in parts[r] if k != "rewards") == aux
+            for key in aux:
+                torch.testing.assert_close(parts[r][key], even_share(whole[key], r, 2))
         # ... and the bonus is there: the env pays only -0.02, 0 and 1
         plain = torch.tensor([-0.02, 0.0, 1.0])
         assert (whole["rewards"].reshape(-1, 1) - plain).abs().min(-1).values.max() > 1e-4
