@@ -6,6 +6,8 @@ their passes without changing the policy's minibatch count."""
 
 from __future__ import annotations
 
+import copy
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -203,6 +205,39 @@ def test_rewards_before_gae_are_the_env_rewards_plus_lambda_times_log_omega():
     assert pieces_in_pipeline.index(AsorRewardConnector) < pieces_in_pipeline.index(SharedValuesGAE)
 
 
+def test_potential_shaping_on_ppo_takes_the_next_row_and_stops_at_termination():
+    """r + λ(γ·b(s′) − b(s)), b = log ω before the step: in PPO's batch s′ of a valid row is the
+    next row (a chunk's last s′ is its bootstrap row), and b(s′) = 0 where the episode ended."""
+    lrn = learner(preset="paper", lambda_=0.5, shaping="potential")
+    disc_before = copy.deepcopy(lrn.module[DISC].unwrapped().state.disc)
+    eps = episodes(0)  # 6 terminated episodes of 10 steps: 11 rows each with the bootstrap row
+    env = np.concatenate([np.append(e.get_rewards(), 0.0) for e in eps])
+    pb = module_batch(lrn, eps)[DEFAULT_MODULE_ID]
+    rows = pb[Columns.LOSS_MASK].bool().nonzero().squeeze(-1)
+    with torch.no_grad():
+        b = reward_bonus(disc_before(pb[Columns.OBS].float()), "log", -5.0)
+    alive = torch.ones(60)
+    alive[9::10] = 0.0  # the last step of each episode: terminated
+    gamma = lrn.config.gamma
+    expected = torch.as_tensor(env, dtype=torch.float32)[rows] + 0.5 * (
+        gamma * b[rows + 1] * alive - b[rows]
+    )
+    torch.testing.assert_close(pb[Columns.REWARDS][rows].float(), expected)
+
+
+def test_the_warm_up_waits_for_a_critic_that_explains_the_returns():
+    """Robust default: no bonus while the critic's explained variance of the chunks' returns
+    (bootstrapped with V at each truncated chunk's end) is ≤ 0; V ≡ 0 explains nothing."""
+    lrn = learner(lambda_=0.3)
+    for p in lrn.module[DEFAULT_MODULE_ID].unwrapped().vf.parameters():
+        torch.nn.init.zeros_(p)
+    eps = episodes(0, terminated=False)
+    env = np.concatenate([np.append(e.get_rewards(), 0.0) for e in eps])
+    rewards = module_batch(lrn, eps)[DEFAULT_MODULE_ID][Columns.REWARDS]
+    torch.testing.assert_close(rewards, torch.as_tensor(env, dtype=rewards.dtype))
+    assert lrn.module[DISC].unwrapped().state.critic_ready.item() == 0.0
+
+
 def test_shared_values_are_the_critics_values():
     lrn = learner(preset="paper", mode="srpo", lambda_=0.0)
     batch = module_batch(lrn, episodes(0))
@@ -237,8 +272,8 @@ def test_proxies_other_than_per_dynamics_need_no_dynamics_ids(proxy):
 
 def test_a_nan_observation_fails_with_a_clear_error():
     eps = episodes(0)
-    eps[2].observations[3][1] = np.nan
-    with pytest.raises(ValueError, match=r"1 observation\(s\) of policy 'default_policy' .*NaN"):
+    eps[2].observations[3][1] = eps[4].observations[0][1] = np.nan
+    with pytest.raises(ValueError, match=r"2 observation\(s\) of policy 'default_policy' .*NaN"):
         module_batch(learner(), eps)
 
 
@@ -282,7 +317,8 @@ class DictObsPolicy(TorchRLModule, ValueFunctionAPI):
         return self.vf(self._inputs(batch)).squeeze(-1)
 
 
-def test_obs_keys_give_the_aux_modules_only_those_keys():
+@pytest.mark.parametrize("proxy", ["rnd", "ensemble"])  # the ensemble also reads s′
+def test_obs_keys_give_the_aux_modules_only_those_keys(proxy):
     space = gym.spaces.Dict({"noise": gym.spaces.Box(-10, 10, (2,)), "pos": OBS})
     config = (
         PPOConfig()
@@ -290,7 +326,7 @@ def test_obs_keys_give_the_aux_modules_only_those_keys():
         .training(train_batch_size=60, minibatch_size=30, num_epochs=1)
         .rl_module(rl_module_spec=RLModuleSpec(module_class=DictObsPolicy))
     )
-    config = rllib_asor.with_asor(config, **(SMALL | {"obs_keys": ["pos"]}))
+    config = rllib_asor.with_asor(config, **(SMALL | {"obs_keys": ["pos"], "proxy": proxy}))
     lrn = config.build_learner(
         env=None, spaces={"__env__": (space, ACT), DEFAULT_MODULE_ID: (space, ACT)}
     )
@@ -314,6 +350,9 @@ def test_obs_keys_give_the_aux_modules_only_those_keys():
     batch = module_batch(lrn, eps)
     states = torch.as_tensor(np.concatenate([e.get_observations()[:-1] for e in episodes(0)]))
     torch.testing.assert_close(batch[PROXY][Columns.OBS], states)
+    if proxy == "ensemble":
+        after = torch.as_tensor(np.concatenate([e.get_observations()[1:] for e in episodes(0)]))
+        torch.testing.assert_close(batch[PROXY][Columns.NEXT_OBS], after)
     assert batch[DISC][Columns.OBS].shape[1] == 3 and batch[DISC][Columns.OBS].abs().max() < 10
 
 
