@@ -86,6 +86,53 @@ def episodes(seed: int, n: int = 6, length: int = 10, terminated: bool = True, i
     return out
 
 
+def ma_learner(**asor):
+    """Multi-agent PPO+ASOR: agent "a<i>" acts for policy "p<i>" (i = 0, 1)."""
+    config = (
+        PPOConfig()
+        .environment(observation_space=OBS, action_space=ACT)
+        .multi_agent(policies={"p0", "p1"}, policy_mapping_fn=lambda aid, *a, **k: f"p{aid[-1]}")
+        .training(train_batch_size=60, minibatch_size=30, num_epochs=2, lr=1e-3)
+        .rl_module(model_config={"fcnet_hiddens": [16]})
+        .debugging(seed=0)
+    )
+    config = rllib_asor.with_asor(config, **(SMALL | asor))
+    spaces = {"__env__": (OBS, ACT), "p0": (OBS, ACT), "p1": (OBS, ACT)}
+    return config.build_learner(env=None, spaces=spaces)
+
+
+def ma_episodes(seed: int, agents: tuple[str, ...], n: int = 4, length: int = 10):
+    """Like `episodes`, with `agents` acting together (each for its own policy)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        centre = 2.0 if i % 2 else -2.0
+
+        def obs(c=centre):
+            return {a: (rng.normal(size=3) * 0.3 + c).astype(np.float32) for a in agents}
+
+        ep = MultiAgentEpisode(
+            observation_space=dict.fromkeys(agents, OBS),
+            action_space=dict.fromkeys(agents, ACT),
+            agent_to_module_mapping_fn=lambda aid, episode: f"p{aid[-1]}",
+        )
+        ep.add_env_reset(observations=obs(), infos={a: {} for a in agents})
+        outputs = {Columns.ACTION_LOGP: np.float32(-0.69), Columns.ACTION_DIST_INPUTS: np.zeros(2)}
+        for t in range(length):
+            last = t == length - 1
+            ep.add_env_step(
+                observations=obs(),
+                actions={a: int(rng.integers(2)) for a in agents},
+                rewards=dict.fromkeys(agents, (1.0 if i % 2 else 0.0) if last else -0.02),
+                infos={a: {} for a in agents},
+                terminateds={"__all__": last},
+                truncateds={"__all__": False},
+                extra_model_outputs=dict.fromkeys(agents, outputs),
+            )
+        out.append(ep.to_numpy())
+    return out
+
+
 def update(lrn, eps, step=60, minibatch_size=30):
     return lrn.update(
         episodes=eps,
@@ -484,6 +531,14 @@ def test_chunks_of_a_multi_agent_episode_per_module_with_the_first_states_dynami
     b = piece._chunks([ep], "pol_b", torch.tensor([True, False]))
     assert [(c.key[1], c.start, c.stop, c.dynamics_id) for c in a] == [("a", 0, 2, 4)]
     assert [(c.key[1], c.start, c.stop, c.dynamics_id) for c in b] == [("b", 0, 1, 2)]
+
+
+def test_a_policy_without_rows_in_the_batch_is_left_alone():
+    lrn = ma_learner()
+    batch = module_batch(lrn, ma_episodes(0, ("a0",)))  # "p1" did not act
+    assert sorted(batch) == [disc_module_id("p0"), proxy_module_id("p0"), "p0"]
+    batch = module_batch(lrn, ma_episodes(1, ("a0", "a1")))
+    assert disc_module_id("p1") in batch and batch["p1"][Columns.REWARDS].shape == (44,)
 
 
 def test_gae_on_shared_values_equals_gae_with_its_own_critic_pass(monkeypatch):

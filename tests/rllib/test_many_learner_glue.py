@@ -16,7 +16,16 @@ import torch.distributed as dist
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 
 from rllib_asor.rllib.connector import even_share
-from tests.rllib.test_glue_behaviour import DISC, PROXY, episodes, learner, module_batch
+from rllib_asor.rllib.learners import disc_module_id
+from tests.rllib.test_glue_behaviour import (
+    DISC,
+    PROXY,
+    episodes,
+    learner,
+    ma_episodes,
+    ma_learner,
+    module_batch,
+)
 
 SETTINGS = {
     "paper": {"preset": "paper", "lambda_": 0.3},
@@ -92,6 +101,52 @@ def test_two_learners_get_what_one_learner_computes_on_both_batches(name, tmp_pa
         # ... and the bonus is there: the env pays only -0.02, 0 and 1
         plain = torch.tensor([-0.02, 0.0, 1.0])
         assert (whole["rewards"].reshape(-1, 1) - plain).abs().min(-1).values.max() > 1e-4
+
+
+def _ma_pieces(batch: dict, policy: str) -> dict[str, torch.Tensor]:
+    out = {k: v.clone() for k, v in batch[disc_module_id(policy)].items()}
+    if policy in batch:  # absent on a Learner whose agents of that policy did not act
+        out["rewards"] = batch[policy][Columns.REWARDS].clone()
+    return out
+
+
+MA_AGENTS = (("a0", "a1"), ("a0",))  # rank 1 has no rows of policy "p1"
+
+
+def _ma_rank(rank: int, store: str, out: str) -> None:
+    torch.set_num_threads(1)
+    dist.init_process_group(
+        "gloo",
+        init_method=f"file://{store}",
+        rank=rank,
+        world_size=2,
+        timeout=timedelta(seconds=60),
+    )
+    try:
+        batch = module_batch(ma_learner(), ma_episodes(rank, MA_AGENTS[rank]))
+        pieces = {p: _ma_pieces(batch, p) for p in ("p0", "p1")}
+        torch.save(pieces, Path(out) / f"{rank}.pt")
+    finally:
+        dist.destroy_process_group()
+
+
+def test_a_learner_without_rows_of_a_policy_still_takes_part_in_its_update(tmp_path):
+    """Multi-agent on two Learners: a policy whose agents acted only in rank 0's episodes still
+    gets ASOR's update on every rank (it is collective), with rank 0's rows ranked as one
+    Learner ranks them and an equal share of the discriminator's batch on each rank."""
+    ranks = run_two_ranks(_ma_rank, tmp_path)
+    whole = module_batch(ma_learner(), ma_episodes(0, MA_AGENTS[0]) + ma_episodes(1, MA_AGENTS[1]))
+    for policy in ("p0", "p1"):
+        one = _ma_pieces(whole, policy)
+        n0 = ranks[0][policy]["rewards"].shape[0]
+        torch.testing.assert_close(ranks[0][policy]["rewards"], one["rewards"][:n0])
+        if policy == "p1":
+            assert "rewards" not in ranks[1][policy] and n0 == one["rewards"].shape[0]
+        else:
+            torch.testing.assert_close(ranks[1][policy]["rewards"], one["rewards"][n0:])
+        for key in (k for k in one if k != "rewards"):
+            for r in range(2):
+                torch.testing.assert_close(ranks[r][policy][key], even_share(one[key], r, 2))
 
 
 def _maple_pieces(learner, batch) -> dict[str, torch.Tensor]:
