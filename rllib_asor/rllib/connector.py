@@ -205,7 +205,7 @@ class AsorRewardConnector(ConnectorV2):
             proxy_in = even_share_inputs(whole.proxy_inputs, rank, size)
 
         if built is not None:
-            self._add_to_rewards(batch[policy_id], policy_id, built[1], own_delta)
+            self._add_to_rewards(batch[policy_id], built[1], own_delta)
         batch[ids.disc] = {Columns.OBS: disc_feats, LABEL: disc_labels}
         self.aux_batch_sizes[ids.disc] = disc_feats.shape[0]
         if ids.proxy is not None:
@@ -247,6 +247,13 @@ class AsorRewardConnector(ConnectorV2):
                 f"ASOR: {bad} observation(s) of policy {policy_id!r} contain NaN/inf; "
                 "the reward augmentation needs finite observations (check the env)"
             )
+        env_rewards = rewards.reshape(-1)[rows]
+        if not torch.isfinite(env_rewards).all():
+            bad = int((~torch.isfinite(env_rewards)).sum())
+            raise ValueError(
+                f"ASOR: {bad} reward(s) of policy {policy_id!r} are NaN/inf; the reward "
+                "augmentation needs finite rewards (check the env)"
+            )
         with torch.no_grad():
             raw_values = self.value_fn(policy, pb)
         all_values = raw_values.reshape(-1).float()
@@ -265,7 +272,7 @@ class AsorRewardConnector(ConnectorV2):
 
         asor_batch = AsorBatch(
             features=features,
-            env_rewards=rewards.reshape(-1)[rows],
+            env_rewards=env_rewards,
             values=all_values[rows],
             gamma=self.gamma,
             timestep=self.timestep_fn(),
@@ -283,18 +290,13 @@ class AsorRewardConnector(ConnectorV2):
             asor_batch.next_features = next_features
         return asor_batch, rows, raw_values
 
-    def _add_to_rewards(
-        self, pb: dict, policy_id: str, rows: torch.Tensor, delta: torch.Tensor
-    ) -> None:
-        """rewards[rows] += delta (the valid rows of the policy's batch)."""
+    def _add_to_rewards(self, pb: dict, rows: torch.Tensor, delta: torch.Tensor) -> None:
+        """rewards[rows] += delta (the valid rows of the policy's batch; both are finite:
+        checked in `_asor_batch` and by `asor_update`)."""
         rewards = pb[Columns.REWARDS]
         added = torch.zeros(rewards.numel(), dtype=rewards.dtype, device=rewards.device)
         added[rows] = delta.to(rewards.dtype)
         pb[Columns.REWARDS] = rewards + added.reshape(rewards.shape)
-        if not torch.isfinite(pb[Columns.REWARDS]).all():
-            raise ValueError(
-                f"ASOR: rewards of policy {policy_id!r} are NaN/inf after augmentation"
-            )
 
     def _chunks(self, episodes: Any, policy_id: str, valid: torch.Tensor) -> list[Chunk] | None:
         """The batch's episode chunks of `policy_id` in row order (valid-row indices), or None

@@ -324,6 +324,37 @@ def test_a_nan_observation_fails_with_a_clear_error():
         module_batch(learner(), eps)
 
 
+def test_a_nan_reward_fails_naming_the_policy():
+    eps = episodes(0)
+    eps[1].rewards.data[4] = eps[3].rewards.data[0] = np.nan
+    with pytest.raises(ValueError, match=r"2 reward\(s\) of policy 'default_policy' are NaN"):
+        module_batch(learner(), eps)
+
+
+def test_the_policys_minibatches_are_shuffled_when_asked(monkeypatch):
+    seen = {}
+    for shuffle in (False, True):
+        lrn, rows = learner(), []
+        real_loss = type(lrn).compute_loss_for_module
+
+        def spy(self, *, module_id, batch, rows=rows, real_loss=real_loss, **kw):
+            if module_id == DEFAULT_MODULE_ID:
+                rows.append(batch[Columns.OBS].clone())
+            return real_loss(self, module_id=module_id, batch=batch, **kw)
+
+        monkeypatch.setattr(type(lrn), "compute_loss_for_module", spy)
+        lrn.update(
+            episodes=episodes(0),
+            timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: 60},
+            minibatch_size=30,
+            num_epochs=2,
+            shuffle_batch_per_epoch=shuffle,
+        )
+        seen[shuffle] = torch.cat(rows)
+    assert seen[False].shape == seen[True].shape == (150, 3)
+    assert not torch.equal(seen[False], seen[True])
+
+
 def test_the_connector_logs_the_last_updates_metrics_and_runs_without_a_logger(monkeypatch):
     from rllib_asor.rllib import connector
 
