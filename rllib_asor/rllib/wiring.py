@@ -99,7 +99,7 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
     config.rl_module(rl_module_spec=_module_spec(config, asor))
     config.learners(
         learner_class=learner_class,
-        learner_config_dict={**(config.learner_config_dict or {}), "asor": asor_dict},
+        learner_config_dict={"asor": asor_dict},  # RLlib merges it into the user's dict
     )
     add_callbacks(config, AsorMetricsCallback)
     if config.policies_to_train is not None:  # single-agent configs may set it too
