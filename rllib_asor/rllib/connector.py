@@ -128,9 +128,9 @@ class AsorRewardConnector(ConnectorV2):
         *,
         asor: AsorConfig,
         aux_ids: dict[str, AuxModuleIds],
-        timestep_fn: Callable[[], float] = lambda: 0.0,
-        value_fn: ValueFn = critic_values,
-        gamma: float = 0.99,
+        timestep_fn: Callable[[], float],
+        value_fn: ValueFn,
+        gamma: float,
         **kwargs: Any,
     ) -> None:
         super().__init__(input_observation_space, input_action_space, **kwargs)

@@ -9,8 +9,6 @@ untouched (`rllib_asor.algorithms.escp`, which knows nothing of ASOR).
 
 from __future__ import annotations
 
-from typing import Any
-
 from ray.rllib.algorithms.sac.torch.sac_torch_learner import SACTorchLearner
 
 from rllib_asor.algorithms.escp.learner import EscpLearnerMixin
@@ -21,5 +19,4 @@ from rllib_asor.rllib.learners import FastSoftQAsorMixin
 class AsorESCPTorchLearner(FastSoftQAsorMixin, EscpLearnerMixin, SACTorchLearner):
     """ESCP's Learner with ASOR's reward augmentation on the fast path's batches."""
 
-    def asor_connector_kwargs(self) -> dict[str, Any]:
-        return {"value_fn": escp_state_values, "gamma": self.config.gamma}
+    asor_value_fn = staticmethod(escp_state_values)

@@ -94,6 +94,8 @@ class AsorLearnerMixin(SameMathSpeedMixin):
     """The piece ASOR must precede (None: append at the end of the pipeline)."""
     asor_in_pipeline: bool = True
     """False where batches bypass the Learner connector (offline); then `_update` applies it."""
+    asor_value_fn = staticmethod(critic_values)
+    """V(s) of a policy's batch for the ranking (off-policy Learners: from their Q critics)."""
 
     def build(self) -> None:
         super().build()  # type: ignore[misc]
@@ -117,7 +119,8 @@ class AsorLearnerMixin(SameMathSpeedMixin):
             asor=self.asor,
             aux_ids=aux,
             timestep_fn=lambda: self._asor_timestep,
-            **self.asor_connector_kwargs(),
+            value_fn=self.asor_value_fn,
+            gamma=self.config.gamma,
         )
         if self.asor_in_pipeline:
             self._insert_asor_piece()
@@ -151,10 +154,6 @@ class AsorLearnerMixin(SameMathSpeedMixin):
             shared = SharedValuesGAE(gamma=gae.gamma, lambda_=gae.lambda_)
             pipeline.insert_after(GeneralAdvantageEstimation, shared)
             pipeline.remove(GeneralAdvantageEstimation)
-
-    def asor_connector_kwargs(self) -> dict[str, Any]:
-        """Extra keyword arguments for the connector (e.g. a `value_fn` for off-policy)."""
-        return {"value_fn": critic_values, "gamma": self.config.gamma}
 
     def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
         super().before_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
@@ -273,9 +272,7 @@ class _SoftQAsorMixin(AsorLearnerMixin, SortedModuleGradientsMixin):
     in the same order on every Learner (algorithms/common/ddp.py)."""
 
     asor_insert_before = None  # after NumpyToTensor, at the end of the pipeline (no GAE)
-
-    def asor_connector_kwargs(self) -> dict[str, Any]:
-        return {"value_fn": soft_q_state_values, "gamma": self.config.gamma}
+    asor_value_fn = staticmethod(soft_q_state_values)
 
     def compute_losses(self, *, fwd_out: dict[str, Any], batch: dict[str, Any]) -> dict[str, Any]:
         losses = super().compute_losses(fwd_out=fwd_out, batch=batch)  # type: ignore[misc]
