@@ -174,6 +174,23 @@ def forget_verdicts(dest: Path, mutants: set[str]) -> None:
             meta.write_text(json.dumps(data))
 
 
+def skip_unselected(dest: Path, patterns: list[str]) -> None:
+    """Mark the untested mutants outside the package's `mutants` patterns skipped, so that a
+    run without names tests only the selected ones (mutmut re-tests every mutant it is given
+    by name, even those with a verdict)."""
+    for meta in (dest / "mutants").rglob("*.py.meta"):
+        data = json.loads(meta.read_text())
+        codes = data["exit_code_by_key"]
+        outside = [
+            k
+            for k, v in codes.items()
+            if v is None and not any(fnmatch.fnmatch(k, p) for p in patterns)
+        ]
+        if outside:
+            codes.update(dict.fromkeys(outside, next(iter(SKIPPED))))
+            meta.write_text(json.dumps(data))
+
+
 def main(argv: list[str] | None = None) -> int:
     defaults, packages = load_packages()
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -204,10 +221,15 @@ def main(argv: list[str] | None = None) -> int:
             dest.mkdir(parents=True, exist_ok=True)
             sync_tree(dest)
             write_config(dest, defaults, pkg)
-            if args.rerun_open and (dest / "mutants").exists():
-                last = summarise(name, dest, pkg, equivalent.get(name, {}))
-                forget_verdicts(dest, set(last["open_survivors"]))
-            rc = run_mutmut(dest, args.children, list(pkg.get("mutants", [])), args.nice)
+            names = list(pkg.get("mutants", []))
+            if (dest / "mutants").exists():  # a later run: keep every verdict, test the rest
+                if args.rerun_open:
+                    last = summarise(name, dest, pkg, equivalent.get(name, {}))
+                    forget_verdicts(dest, set(last["open_survivors"]))
+                if names:
+                    skip_unselected(dest, names)
+                    names = []
+            rc = run_mutmut(dest, args.children, names, args.nice)
             if rc != 0:
                 print(f"mutmut run for {name} exited {rc}", file=sys.stderr)
                 ok = False
