@@ -52,6 +52,19 @@ def run_two_ranks(target, tmp_path: Path, *args) -> list[dict]:
     return [torch.load(tmp_path / f"{r}.pt") for r in range(2)]
 
 
+def join_group(rank: int, store: str) -> None:
+    """This process as `rank` of a two-process gloo group; a Learner left out of a collective
+    makes the other fail within a minute instead of hanging."""
+    torch.set_num_threads(1)
+    dist.init_process_group(
+        "gloo",
+        init_method=f"file://{store}",
+        rank=rank,
+        world_size=2,
+        timeout=timedelta(seconds=60),
+    )
+
+
 def _pieces(batch: dict) -> dict[str, torch.Tensor]:
     out = {f"disc_{k}": v.clone() for k, v in batch[DISC].items()}
     out |= {f"proxy_{k}": v.clone() for k, v in batch.get(PROXY, {}).items()}
@@ -59,14 +72,7 @@ def _pieces(batch: dict) -> dict[str, torch.Tensor]:
 
 
 def _rank(rank: int, store: str, out: str, settings: dict) -> None:
-    torch.set_num_threads(1)
-    dist.init_process_group(  # a Learner left out of a collective fails fast, not hangs
-        "gloo",
-        init_method=f"file://{store}",
-        rank=rank,
-        world_size=2,
-        timeout=timedelta(seconds=60),
-    )
+    join_group(rank, store)
     try:
         lrn = learner(**settings)
         pieces = {}
@@ -114,14 +120,7 @@ MA_AGENTS = (("a0", "a1"), ("a0",))  # rank 1 has no rows of policy "p1"
 
 
 def _ma_rank(rank: int, store: str, out: str) -> None:
-    torch.set_num_threads(1)
-    dist.init_process_group(
-        "gloo",
-        init_method=f"file://{store}",
-        rank=rank,
-        world_size=2,
-        timeout=timedelta(seconds=60),
-    )
+    join_group(rank, store)
     try:
         batch = module_batch(ma_learner(), ma_episodes(rank, MA_AGENTS[rank]))
         pieces = {p: _ma_pieces(batch, p) for p in ("p0", "p1")}
@@ -179,8 +178,7 @@ def _maple_pieces(learner, batch) -> dict[str, torch.Tensor]:
 def _maple_rank(rank: int, store: str, out: str) -> None:
     from tests.rllib.test_soft_q_glue import maple_batch, maple_learner
 
-    torch.set_num_threads(1)
-    dist.init_process_group("gloo", init_method=f"file://{store}", rank=rank, world_size=2)
+    join_group(rank, store)
     try:
         lrn = maple_learner(preset="paper", lambda_=0.1)
         torch.save(_maple_pieces(lrn, maple_batch(lrn, seed=rank)[1]), Path(out) / f"{rank}.pt")
