@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+import game_env
 from game_env.constants import FEET
 from game_env.env import ObstacleRaceEnv
 from game_env.sim import DECAY, RaceSim
@@ -158,3 +159,23 @@ def test_a_fallen_racer_respawns_still_at_its_own_spot_by_the_last_archive_point
     assert not (r.launched or r.grounded or r.in_jump)
     assert tuple(r.anchor) == pytest.approx(spot[:2]) and len(r.anchor) == 2
     assert r.anchor_t == pytest.approx(sim.data.time)
+
+
+def test_the_parallel_env_pays_each_racer_its_terms_and_ends_each_at_its_own_time():
+    env = game_env.parallel_env(num_racers=2, map_id=0, course_seed=0, max_episode_steps=3)
+    env.reset(seed=0)
+    first, second = env.possible_agents
+    d = env.sim.course.destination
+    place(env.sim, d.cx, d.cy, d.z + 0.01)  # the first racer at the destination
+    _, rewards, terms, truncs, infos = env.step({a: IDLE[0] for a in env.agents})
+    for a in (first, second):
+        assert rewards[a] == pytest.approx(sum(infos[a]["reward_terms"].values()))
+    assert infos[first]["reward_terms"]["arrive_destination"] == 1.0
+    assert terms == {first: True, second: False} and truncs == {first: False, second: False}
+    assert infos[first]["episode_metrics"]["success"] == 1.0
+    assert "episode_metrics" not in infos[second] and env.agents == [second]
+    for t in (1, 2):  # the time limit truncates the other racer at step 3, not later
+        _, rewards, terms, truncs, infos = env.step({second: IDLE[0]})
+        assert terms == {second: False} and truncs == {second: t == 2}
+    assert infos[second]["episode_metrics"]["success"] == 0.0 and env.agents == []
+    env.close()
