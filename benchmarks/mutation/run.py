@@ -27,6 +27,7 @@ import shutil
 import subprocess
 import sys
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -162,33 +163,33 @@ def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> d
     }
 
 
-def forget_verdicts(dest: Path, mutants: set[str]) -> None:
-    """Mark these mutants untested, so that mutmut's next run tests them again and keeps every
-    other verdict (naming mutants on mutmut's command line instead drops the others' verdicts)."""
+def _set_verdicts(dest: Path, pick: Callable[[str, int | None], bool], code: int | None) -> None:
+    """Set the verdict of every mutant `pick(name, verdict)` selects to `code`, in mutmut's
+    own records (its next run tests exactly the mutants without a verdict)."""
     for meta in (dest / "mutants").rglob("*.py.meta"):
         data = json.loads(meta.read_text())
         codes = data["exit_code_by_key"]
-        hit = mutants.intersection(codes)
+        hit = [k for k, v in codes.items() if pick(k, v)]
         if hit:
-            codes.update(dict.fromkeys(hit))
+            codes.update(dict.fromkeys(hit, code))
             meta.write_text(json.dumps(data))
+
+
+def forget_verdicts(dest: Path, mutants: set[str]) -> None:
+    """Mark these mutants untested, so that mutmut's next run tests them again and keeps every
+    other verdict (naming mutants on mutmut's command line instead drops the others' verdicts)."""
+    _set_verdicts(dest, lambda k, _: k in mutants, None)
 
 
 def skip_unselected(dest: Path, patterns: list[str]) -> None:
     """Mark the untested mutants outside the package's `mutants` patterns skipped, so that a
     run without names tests only the selected ones (mutmut re-tests every mutant it is given
     by name, even those with a verdict)."""
-    for meta in (dest / "mutants").rglob("*.py.meta"):
-        data = json.loads(meta.read_text())
-        codes = data["exit_code_by_key"]
-        outside = [
-            k
-            for k, v in codes.items()
-            if v is None and not any(fnmatch.fnmatch(k, p) for p in patterns)
-        ]
-        if outside:
-            codes.update(dict.fromkeys(outside, next(iter(SKIPPED))))
-            meta.write_text(json.dumps(data))
+    _set_verdicts(
+        dest,
+        lambda k, v: v is None and not any(fnmatch.fnmatch(k, p) for p in patterns),
+        next(iter(SKIPPED)),
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
