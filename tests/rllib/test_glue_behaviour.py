@@ -142,6 +142,21 @@ def update(lrn, eps, step=60, minibatch_size=30):
     )
 
 
+def policy_batches_seen(monkeypatch, learner) -> list[dict[str, torch.Tensor]]:
+    """Record what the policy's loss gets: OBS, NEXT_OBS (when there) and REWARDS per call."""
+    seen: list[dict[str, torch.Tensor]] = []
+    real = type(learner).compute_loss_for_module
+
+    def spy(self, *, module_id, config, batch, fwd_out):
+        if module_id == DEFAULT_MODULE_ID:
+            keys = (Columns.OBS, Columns.NEXT_OBS, Columns.REWARDS)
+            seen.append({k: batch[k].clone() for k in keys if k in batch})
+        return real(self, module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
+
+    monkeypatch.setattr(type(learner), "compute_loss_for_module", spy)
+    return seen
+
+
 def module_batch(lrn, eps):
     """What the Learner connector gives the loss (rewards after ASOR, before GAE's columns)."""
     return lrn._learner_connector(rl_module=lrn.module, batch={}, episodes=eps, metrics=lrn.metrics)
@@ -334,15 +349,8 @@ def test_a_nan_reward_fails_naming_the_policy():
 def test_the_policys_minibatches_are_shuffled_when_asked(monkeypatch):
     seen = {}
     for shuffle in (False, True):
-        lrn, rows = learner(), []
-        real_loss = type(lrn).compute_loss_for_module
-
-        def spy(self, *, module_id, batch, rows=rows, real_loss=real_loss, **kw):
-            if module_id == DEFAULT_MODULE_ID:
-                rows.append(batch[Columns.OBS].clone())
-            return real_loss(self, module_id=module_id, batch=batch, **kw)
-
-        monkeypatch.setattr(type(lrn), "compute_loss_for_module", spy)
+        lrn = learner()
+        batches = policy_batches_seen(monkeypatch, lrn)
         lrn.update(
             episodes=episodes(0),
             timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: 60},
@@ -350,7 +358,8 @@ def test_the_policys_minibatches_are_shuffled_when_asked(monkeypatch):
             num_epochs=2,
             shuffle_batch_per_epoch=shuffle,
         )
-        seen[shuffle] = torch.cat(rows)
+        monkeypatch.undo()
+        seen[shuffle] = torch.cat([b[Columns.OBS] for b in batches])
     assert seen[False].shape == seen[True].shape == (150, 3)
     assert not torch.equal(seen[False], seen[True])
 
@@ -615,17 +624,10 @@ def test_the_policy_gets_its_minibatches_when_the_discriminator_batch_is_longer(
     # robust: D_P from the archive, D_Q the whole batch
     lrn = learner(lambda_warmup=False, aux_epochs=aux_epochs)
     update(lrn, episodes(0))  # fills the archive
-    counted = []
-    real_loss = type(lrn).compute_loss_for_module
-
-    def spy(self, *, module_id, **kw):
-        counted.append(module_id)
-        return real_loss(self, module_id=module_id, **kw)
-
-    monkeypatch.setattr(type(lrn), "compute_loss_for_module", spy)
+    seen = policy_batches_seen(monkeypatch, lrn)
     update(lrn, episodes(1), step=120, minibatch_size=10)
     disc_rows = lrn._asor_piece.aux_batch_sizes[DISC]
     assert disc_rows > 66  # archive states + the whole batch
     # 2 epochs of 66 rows in minibatches of 10: 14, as without ASOR (2 epochs of the
     # discriminator's rows would be more)
-    assert counted.count(DEFAULT_MODULE_ID) == 14
+    assert len(seen) == 14

@@ -29,6 +29,7 @@ from rllib_asor.asor.update import AsorState
 from rllib_asor.rllib import connector
 from rllib_asor.rllib.learners import disc_module_id, proxy_module_id, soft_q_state_values
 from rllib_asor.rllib.maple_asor import maple_asor_bonus, real_batch
+from tests.rllib.test_glue_behaviour import policy_batches_seen
 
 OBS = gym.spaces.Box(-10, 10, (3,), np.float32)
 BOX = gym.spaces.Box(-1, 1, (2,), np.float32)
@@ -80,21 +81,6 @@ def params(module) -> dict[str, torch.Tensor]:
 
 def changed(before: dict, module) -> bool:
     return any(not torch.equal(before[k], v) for k, v in module.state_dict().items())
-
-
-def policy_batches_seen(monkeypatch, learner) -> list[dict[str, torch.Tensor]]:
-    """Record what the policy's loss gets: OBS, NEXT_OBS (when there) and REWARDS per call."""
-    seen: list[dict[str, torch.Tensor]] = []
-    real = type(learner).compute_loss_for_module
-
-    def spy(self, *, module_id, config, batch, fwd_out):
-        if module_id == DEFAULT_MODULE_ID:
-            keys = (Columns.OBS, Columns.NEXT_OBS, Columns.REWARDS)
-            seen.append({k: batch[k].clone() for k in keys if k in batch})
-        return real(self, module_id=module_id, config=config, batch=batch, fwd_out=fwd_out)
-
-    monkeypatch.setattr(type(learner), "compute_loss_for_module", spy)
-    return seen
 
 
 def test_sac_td_targets_see_the_bonus_of_the_discriminator_before_its_step(monkeypatch):
