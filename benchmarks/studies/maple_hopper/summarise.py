@@ -36,15 +36,18 @@ ORDER = ("maple", "maple_asor_paper", "maple_asor", "mopo", "cql")
 def load(runs: Path) -> dict[tuple[str, str], dict[int, dict[str, Any]]]:
     """{(dataset, method): {seed: run}}."""
     out: dict[tuple[str, str], dict[int, dict[str, Any]]] = {}
-    prints: dict[str, dict[str, list[str]]] = {}
+    prints: dict[tuple[str, int], dict[str, list[str]]] = {}
     for path in sorted(runs.glob("*.json")):
         r = json.loads(path.read_text())
         out.setdefault((r["dataset"], r["method"]), {})[int(r["seed"])] = r
         fp = r.get("data_fingerprint", "unrecorded")
-        prints.setdefault(r["dataset"], {}).setdefault(fp, []).append(path.name)
-    mixed = {ds: fps for ds, fps in prints.items() if len(fps) > 1}
-    if mixed:  # data/ is rebuilt each session: pairs must have trained on the same rows
-        raise SystemExit(f"runs of one dataset trained on different data: {mixed}")
+        prints.setdefault((r["dataset"], int(r["seed"])), {}).setdefault(fp, []).append(path.name)
+    # data/ is rebuilt each session and the rebuild is not bit-identical: the runs of one
+    # (dataset, seed) (a pair, and the ensemble they share) must have trained on the same rows;
+    # different seeds may come from different builds, like any other seed-level randomness.
+    mixed = {f"{ds}/{seed}": fps for (ds, seed), fps in prints.items() if len(fps) > 1}
+    if mixed:
+        raise SystemExit(f"runs of one (dataset, seed) trained on different data: {mixed}")
     return out
 
 
