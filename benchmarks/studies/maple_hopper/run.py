@@ -7,7 +7,10 @@ different --datasets / --seeds) can share one folder. The decision rule and the 
 fixed in docs/results.md ("MAPLE+ASOR on the mixed-dynamics Hopper data") before any run.
 
 Data: `rllib data collect` Hopper parts of one quality from all three dynamics (`original`,
-`body_mass`, `density_10`), mixed, as the paper. Methods:
+`body_mass`, `density_10`), mixed, as the paper. The study's data is committed beside this
+file (`data/`: the medium and random parts and the manifest of one `make datasets
+DATASET_STEPS=20000` build, session 14): rebuilding gives other rows on another machine, so
+every later run trains on these (`--data` points elsewhere if you want your own build). Methods:
 - `maple`: `MapleConfig` (tuned_examples/offline/maple-hopper.yaml's settings);
 - `maple_asor_paper`: `with_asor(..., preset="paper", lambda_=0.1)` (the paper's form, SRPO's η);
 - `maple_asor`: `with_asor(...)` (the robust default);
@@ -217,7 +220,9 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    p.add_argument("--data", default=str(ROOT / "data/offline/hopper"), help="task dir")
+    p.add_argument(
+        "--data", default=str(HERE / "data"), help="task dir (default: the study's committed data)"
+    )
     p.add_argument("--datasets", nargs="+", default=["medium", "random"])
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
