@@ -18,7 +18,9 @@ every later run trains on these (`--data` points elsewhere if you want your own 
 - `cql`: the project's CQL (tuned_examples/offline/cql-hopper.yaml, fast path) for the same
   number of gradient steps.
 MAPLE, both MAPLE+ASOR and MOPO of one (dataset, seed) load the same cached ensemble (trained by
-whichever runs first; run the `maple` jobs first or one process per dataset).
+whichever runs first; run the `maple` jobs first or one process per dataset). The ensembles
+are committed (`ensembles/`, keyed by the data's bytes and the ensemble settings), so the
+methods of one seed may run in different sessions and still share theirs.
 
 Score: the deterministic policy, `--eval-episodes` episodes under each dynamics, D4RL-normalised
 against the dataset's own random and expert returns (`rllib_asor.data.scoring.normalized_score`),
@@ -241,7 +243,12 @@ def main(argv: list[str] | None = None) -> None:
         help="cap on ensemble epochs (the port: until 5 epochs without improvement; the "
         "study's budget: 100, docs/results.md)",
     )
-    p.add_argument("--ensemble-cache", default=os.path.expanduser("~/.cache/rllib-asor/maple"))
+    p.add_argument(
+        "--ensemble-cache",
+        default=str(HERE / "ensembles"),
+        help="trained ensembles, one per (dataset, seed), committed (default: beside this file) "
+        "so that the methods of one seed can run in different sessions and still share it",
+    )
     p.add_argument("--runs", default=str(HERE / "runs"))
     args = p.parse_args(argv)
 

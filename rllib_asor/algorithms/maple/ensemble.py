@@ -288,13 +288,19 @@ def _load_members(model: GaussianEnsemble, saved: dict[str, torch.Tensor], idx: 
 def dataset_key(paths: Sequence[str], settings: dict[str, Any], extra: str = "") -> str:
     """A short key for (dataset parts, ensemble settings): paired runs share the ensemble.
 
-    The parts' paths and the newest modification time of their parquet files identify the data.
+    The data is identified by the bytes of the parts' parquet files, not by their paths or
+    modification times: a copied, moved or freshly cloned dataset finds its ensemble, and
+    rewritten rows never do.
     """
     parts = []
-    for p in sorted(str(Path(q).resolve()) for q in paths):
-        mtimes = [f.stat().st_mtime_ns for f in Path(p).glob("*.parquet")]
-        parts.append(f"{p}:{max(mtimes, default=0)}")
-    blob = json.dumps({"parts": parts, "settings": settings, "extra": extra}, sort_keys=True)
+    for p in paths:
+        h = hashlib.sha256()
+        for f in sorted(Path(p).glob("*.parquet")):
+            h.update(f.read_bytes())
+        parts.append(h.hexdigest())
+    blob = json.dumps(
+        {"parts": sorted(parts), "settings": settings, "extra": extra}, sort_keys=True
+    )
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 

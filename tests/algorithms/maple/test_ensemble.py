@@ -12,6 +12,7 @@ from rllib_asor.algorithms.maple.ensemble import (
     GaussianEnsemble,
     cache_path,
     choose_elites,
+    dataset_key,
     gaussian_nll,
     load_ensemble,
     looped_forward,
@@ -112,6 +113,24 @@ def test_training_learns_stops_early_and_keeps_each_members_best_weights(tmp_pat
     x, a = torch.randn(5, 3), torch.randn(5, 2)
     torch.testing.assert_close(loaded.elites(x, a)[0], model.elites(x, a)[0])
     assert rep["elites"] == report.elites
+
+
+def test_cache_key_follows_the_rows_not_the_path(tmp_path) -> None:
+    """A copied or freshly cloned dataset (new path, new mtimes) finds its ensemble; other
+    rows or other ensemble settings do not."""
+    import shutil
+
+    a = tmp_path / "a" / "medium"
+    a.mkdir(parents=True)
+    (a / "part-0.parquet").write_bytes(b"rows of the first build")
+    b = tmp_path / "copy" / "medium"
+    shutil.copytree(a, b)
+    settings = {"ensemble_members": 7}
+    key = dataset_key([str(a)], settings)
+    assert dataset_key([str(b)], settings) == key
+    assert dataset_key([str(a)], {"ensemble_members": 5}) != key
+    (b / "part-0.parquet").write_bytes(b"rows of another build")
+    assert dataset_key([str(b)], settings) != key
 
 
 def test_bad_elite_count_is_refused() -> None:
