@@ -22,6 +22,8 @@ sys.path.insert(0, str(HERE.parents[2]))
 
 LEARNS_AT = 1000.0
 """ESCP 'learns' if its mean stationary return on unseen tasks is ≥ this (rule, docs)."""
+SEEDS = 5
+"""The rule's number of seeds (0-4): the validity bar is decided once ESCP has all of them."""
 PRACTICAL = 0.05
 """A gain must also be ≥ 5 % of ESCP's mean return (rule, docs)."""
 COMPARISONS = (
@@ -81,12 +83,15 @@ def summarise(runs: Path) -> dict[str, Any]:
             row = p.to_json()
             row["rule"] = verdict(p, p.baseline_mean)
             comps.append(row)
-    escp = methods.get("escp", {}).get("stationary", {}).get("mean", float("nan"))
-    return {
-        "methods": methods,
-        "comparisons": comps,
-        "escp_learns": bool(escp >= LEARNS_AT),
-    }
+    escp = methods.get("escp", {}).get("stationary", {"n": 0, "mean": float("nan")})
+    learns = bool(escp["mean"] >= LEARNS_AT)
+    if escp["n"] < SEEDS:
+        answer = f"pending: the validity bar needs ESCP's {SEEDS} seeds ({escp['n']} so far)"
+    elif not learns:
+        answer = "budget too small: ESCP does not learn, the pairs do not test the claim"
+    else:
+        answer = "valid: read the escp_asor − escp rows by the rule"
+    return {"methods": methods, "comparisons": comps, "escp_learns": learns, "answer": answer}
 
 
 def table(res: dict[str, Any]) -> str:
@@ -113,6 +118,7 @@ def table(res: dict[str, Any]) -> str:
             f"{c['diff_mean']:+.0f} | {ci} | {p} | {c['rule']} |"
         )
     lines.append(f"\nESCP learns (stationary mean ≥ {LEARNS_AT:.0f}): {res['escp_learns']}")
+    lines.append(f"The study's answer (the rule): {res['answer']}")
     return "\n".join(lines) + "\n"
 
 
