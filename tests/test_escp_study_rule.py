@@ -39,7 +39,7 @@ def test_validity_bar_waits_for_all_escp_seeds_then_decides(tmp_path: Path) -> N
 def test_gain_needs_five_pairs_an_interval_above_zero_and_five_percent(tmp_path: Path) -> None:
     for seed in range(5):
         write(tmp_path, "escp", seed, 1000.0 + 10 * seed)
-        write(tmp_path, "escp_asor", seed, 1100.0 + 12 * seed)  # +100..+148: > 5 % of ~1,020
+        write(tmp_path, "escp_asor", seed, 1100.0 + 12 * seed)  # +100 … +108: > 5 % of ~1,020
     rows = {(c["treatment"], c["metric"]): c["rule"] for c in summarise(tmp_path)["comparisons"]}
     assert rows[("escp_asor", "stationary")] == "gain"
     for seed in range(5):
