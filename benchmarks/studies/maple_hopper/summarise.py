@@ -42,9 +42,10 @@ def load(runs: Path) -> dict[tuple[str, str], dict[int, dict[str, Any]]]:
         out.setdefault((r["dataset"], r["method"]), {})[int(r["seed"])] = r
         fp = r.get("data_fingerprint", "unrecorded")
         prints.setdefault((r["dataset"], int(r["seed"])), {}).setdefault(fp, []).append(path.name)
-    # data/ is rebuilt each session and the rebuild is not bit-identical: the runs of one
-    # (dataset, seed) (a pair, and the ensemble they share) must have trained on the same rows;
-    # different seeds may come from different builds, like any other seed-level randomness.
+    # a data rebuild is not bit-identical (medium seed 0 ran on an earlier build than the
+    # committed data/, and --data may point at another): the runs of one (dataset, seed) (a
+    # pair, and the ensemble they share) must have trained on the same rows; different seeds
+    # may come from different builds, like any other seed-level randomness.
     mixed = {f"{ds}/{seed}": fps for (ds, seed), fps in prints.items() if len(fps) > 1}
     if mixed:
         raise SystemExit(f"runs of one (dataset, seed) trained on different data: {mixed}")

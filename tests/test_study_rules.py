@@ -1,0 +1,82 @@
+"""The studies' summarisers apply their committed rules: the MAPLE study pairs runs only when
+they trained on the same rows; the ESCP study decides its validity bar before any verdict."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def summariser(study: str):
+    """benchmarks/studies/<study>/summarise.py as a module (the studies are not a package)."""
+    path = ROOT / f"benchmarks/studies/{study}/summarise.py"
+    spec = importlib.util.spec_from_file_location(f"{study}_summarise", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+# ------------------------------------------------------------------ MAPLE: pairs share their rows
+def write_run(runs: Path, method: str, seed: int, fingerprint: str, score: float) -> None:
+    run = {"dataset": "medium", "method": method, "seed": seed, "score": score}
+    run["data_fingerprint"] = fingerprint
+    (runs / f"medium-{method}-{seed}.json").write_text(json.dumps(run))
+
+
+def test_seeds_from_different_data_builds_still_pair(tmp_path: Path) -> None:
+    for seed, fp in [(0, "aaaa"), (1, "bbbb")]:
+        write_run(tmp_path, "maple", seed, fp, 50.0 + seed)
+        write_run(tmp_path, "maple_asor_paper", seed, fp, 40.0 + seed)
+    data = summariser("maple_hopper").load(tmp_path)
+    assert sorted(data[("medium", "maple")]) == [0, 1]
+    assert data[("medium", "maple_asor_paper")][1]["score"] == 41.0
+
+
+def test_a_pair_from_two_data_builds_is_refused(tmp_path: Path) -> None:
+    write_run(tmp_path, "maple", 0, "aaaa", 50.0)
+    write_run(tmp_path, "maple_asor_paper", 0, "bbbb", 40.0)
+    with pytest.raises(SystemExit, match=r"medium/0.*aaaa.*bbbb"):
+        summariser("maple_hopper").load(tmp_path)
+
+
+# ------------------------------------------------------- ESCP: the validity bar, then the rule
+def escp_summary(runs: Path) -> dict:
+    return summariser("escp_walker").summarise(runs)
+
+
+def write_escp_run(runs: Path, method: str, seed: int, stationary: float) -> None:
+    run = {"method": method, "seed": seed, "eval": {"stationary": stationary, "ns": stationary}}
+    (runs / f"{method}-{seed}.json").write_text(json.dumps(run))
+
+
+def test_validity_bar_waits_for_all_escp_seeds_then_decides(tmp_path: Path) -> None:
+    for seed in range(4):
+        write_escp_run(tmp_path, "escp", seed, 2000.0)
+    assert escp_summary(tmp_path)["answer"].startswith("pending")
+    write_escp_run(tmp_path, "escp", 4, 2000.0)
+    assert escp_summary(tmp_path)["answer"].startswith("valid")
+    write_escp_run(tmp_path, "escp", 4, 0.0)  # mean 1,600: still learns
+    assert escp_summary(tmp_path)["escp_learns"]
+    for seed in range(5):
+        write_escp_run(tmp_path, "escp", seed, 999.0)
+    res = escp_summary(tmp_path)
+    assert not res["escp_learns"] and res["answer"].startswith("budget too small")
+
+
+def test_gain_needs_five_pairs_an_interval_above_zero_and_five_percent(tmp_path: Path) -> None:
+    for seed in range(5):
+        write_escp_run(tmp_path, "escp", seed, 1000.0 + 10 * seed)
+        # differences +100 … +108: above 5 % of ESCP's ~1,020
+        write_escp_run(tmp_path, "escp_asor", seed, 1100.0 + 12 * seed)
+    rows = {(c["treatment"], c["metric"]): c["rule"] for c in escp_summary(tmp_path)["comparisons"]}
+    assert rows[("escp_asor", "stationary")] == "gain"
+    for seed in range(5):
+        # differences +10 / +11: above 0, under 5 %
+        write_escp_run(tmp_path, "escp_asor", seed, 1010.0 + 10 * seed + seed % 2)
+    rows = {(c["treatment"], c["metric"]): c["rule"] for c in escp_summary(tmp_path)["comparisons"]}
+    assert rows[("escp_asor", "stationary")] == "no detectable difference"
