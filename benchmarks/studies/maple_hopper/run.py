@@ -3,7 +3,10 @@
 A resumable runner: one independent job per (dataset, method, seed), each run saved at once to
 RUNS/<dataset>-<method>-<seed>.json; a rerun skips finished runs, and a job another process is
 running (its lock file names a live pid) is skipped too, so several processes (one per core,
-different --datasets / --seeds) can share one folder. The decision rule and the budget are
+different --datasets / --seeds) can share one folder. An unfinished run is saved after every
+iteration (RUNS/<name>.partial/: the algorithm with its model pool and sampler, the curve; ~0.6
+GB, not committed) and a rerun continues it from there, so a run cut off by a session's end
+loses at most one iteration. The decision rule and the budget are
 fixed in docs/results.md ("MAPLE+ASOR on the mixed-dynamics Hopper data") before any run.
 
 Data: `rllib data collect` Hopper parts of one quality from all three dynamics (`original`,
@@ -34,7 +37,9 @@ and at the end.
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -66,6 +71,7 @@ def maple_config(method: str, dataset: str, seed: int, args: argparse.Namespace)
         "evaluation_episodes": args.eval_episodes_during,
         "ensemble_cache": args.ensemble_cache,
         "ensemble_max_epochs": args.ensemble_max_epochs,
+        "checkpoint_model_pool": True,  # the partial saves resume with the run's own pool
     }
     config = (
         cls()
@@ -133,11 +139,10 @@ def evaluate_run(algo: Any, method: str, args: argparse.Namespace, episodes: int
 
 
 def data_fingerprint(paths: list[str]) -> str:
-    """A hash of the rows of the dataset parts (not of the files' names or metadata): `make
-    datasets` is rerun in each session (data/ is not committed), and runs are only paired
-    when they trained on the same rows (summarise.py checks)."""
+    """A hash of the rows of the dataset parts (not of the files' names or metadata): runs are
+    only paired when they trained on the same rows (summarise.py checks; the first runs
+    trained on per-session builds, before data/ was committed)."""
     import hashlib
-    import json
 
     import pyarrow.parquet as pq
 
@@ -152,7 +157,11 @@ def data_fingerprint(paths: list[str]) -> str:
     return h.hexdigest()[:16]
 
 
-def run_one(dataset: str, method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
+def run_one(
+    dataset: str, method: str, seed: int, args: argparse.Namespace, partial: Path
+) -> dict[str, Any]:
+    """Train one run for `args.iters` iterations, saved to `partial` after each one and
+    continued from there when a run was saved."""
     import numpy as np
 
     cfg = (
@@ -163,17 +172,28 @@ def run_one(dataset: str, method: str, seed: int, args: argparse.Namespace) -> d
     t0 = time.time()
     algo = cfg.build_algo()
     setup_s = time.time() - t0
-    curve, last, t1 = [], {}, time.time()
+    state_file = partial / "state.json"
+    curve, done, spent, resumed_at = [], 0, 0.0, []
+    if state_file.exists():
+        saved = json.loads(state_file.read_text())
+        algo.restore_from_path(str(partial / saved["checkpoint"]))
+        curve, done, spent = saved["curve"], saved["iteration"], saved["train_s"]
+        resumed_at = [*saved["resumed_at"], done]
+        print(f"  {dataset}/{method}/{seed}: resumed after iteration {done}", flush=True)
+    last, t1 = {}, time.time() - spent
     try:
-        for i in range(args.iters):
+        for i in range(done, args.iters):
             last = algo.train()
             ev = last.get("evaluation", {})
             score = float(ev.get("mean/normalized_score", float("nan")))
             if np.isfinite(score):  # iterations without an evaluation report NaN
                 curve.append({"iteration": i + 1, "score": score})
+            if i + 1 < args.iters:
+                state = {"curve": curve, "iteration": i + 1, "resumed_at": resumed_at}
+                _save_partial(algo, partial, {**state, "train_s": time.time() - t1})
             print(
                 f"  {dataset}/{method}/{seed} iter {i + 1}/{args.iters} "
-                f"t={time.time() - t0:.0f}s {curve[-1] if curve else ''}",
+                f"t={time.time() - t1:.0f}s {curve[-1] if curve else ''}",
                 flush=True,
             )
         train_s = time.time() - t1
@@ -196,13 +216,31 @@ def run_one(dataset: str, method: str, seed: int, args: argparse.Namespace) -> d
         "eval_episodes": args.eval_episodes,
         "setup_s": setup_s,
         "train_s": train_s,
-        "wall_s": time.time() - t0,
+        "wall_s": setup_s + time.time() - t1,
+        "resumed_at": resumed_at,
         "final": final,
         "score": final["mean"]["normalized_score"],
         "curve": curve,
         "maple_last": scalars(last.get("maple")),
         "asor_last": scalars(last.get("asor")),
     }
+
+
+def _save_partial(algo: Any, partial: Path, state: dict[str, Any]) -> None:
+    """The run so far: the algorithm checkpoint into the folder the current state does not name,
+    then (atomically) the state naming it, then the previous checkpoint goes; a run killed at
+    any point keeps a state and the checkpoint it names."""
+    partial.mkdir(parents=True, exist_ok=True)
+    state_file = partial / "state.json"
+    current = json.loads(state_file.read_text())["checkpoint"] if state_file.exists() else None
+    name = "algo-b" if current == "algo-a" else "algo-a"
+    shutil.rmtree(partial / name, ignore_errors=True)
+    algo.save_to_path(str(partial / name))
+    tmp = partial / "state.tmp"
+    tmp.write_text(json.dumps({**state, "checkpoint": name}))
+    os.replace(tmp, state_file)
+    if current:
+        shutil.rmtree(partial / current, ignore_errors=True)
 
 
 def _locked_by_other(lock: Path) -> bool:
@@ -276,8 +314,10 @@ def main(argv: list[str] | None = None) -> None:
                 lock.write_text(str(os.getpid()))
                 try:
                     print(f"run {name}", flush=True)
-                    res = run_one(dataset, method, seed, args)
+                    partial = runs / f"{name}.partial"
+                    res = run_one(dataset, method, seed, args, partial)
                     write_json(out, res)
+                    shutil.rmtree(partial, ignore_errors=True)
                     print(
                         f"  {name}: score {res['score']:.1f} wall {res['wall_s']:.0f}s", flush=True
                     )

@@ -18,7 +18,8 @@ offlinerl/algo/modelbase/maple_st.py AlgoTrainer.train`):
 
 The trajectory-ordered data and the pools live in numpy on the driver (BASES.md); the
 networks, the ensemble and the data statistics live in the RLModule, so a checkpoint brings all
-of them back.
+of them back, with the driver's random generator (and, with `checkpoint_model_pool`, the model
+pool: otherwise a restored run refills it with its next rollouts).
 """
 
 from __future__ import annotations
@@ -60,6 +61,9 @@ from rllib_asor.algorithms.maple.settings import MOPO_DEFAULTS, MapleSettings
 from rllib_asor.algorithms.maple.termination import termination_fn
 
 logger = logging.getLogger(__name__)
+
+SAMPLER_STATE = "maple_sampler"
+"""The key of the driver's sampler (random generator, model pool) in the algorithm's state."""
 
 REAL_PREFIX = "real_"
 """Columns of the flat real transitions each SAC batch carries (`real_obs`, ...)."""
@@ -301,8 +305,31 @@ class MAPLE(Algorithm):
             episode_hiddens(self._traj, lambda o, a: nets.hidden_sequences("value", o, a)),
         )
 
+    def get_state(
+        self,
+        components: Any = None,
+        *,
+        not_components: Any = None,
+        **kwargs: Any,
+    ) -> dict[str, Any]:
+        """RLlib's state plus the driver's sampler: its random generator and, with
+        `checkpoint_model_pool`, the model pool."""
+        state = super().get_state(components, not_components=not_components, **kwargs)
+        if self._check_component(SAMPLER_STATE, components, not_components):
+            state[SAMPLER_STATE] = {
+                "rng": self._rng.bit_generator.state,
+                "pool": self._pool.get_state() if self._settings.checkpoint_model_pool else None,
+            }
+        return state
+
     def set_state(self, state: dict[str, Any]) -> None:
         super().set_state(state)
+        sampler = state.get(SAMPLER_STATE)
+        if sampler is not None:
+            self._rng.bit_generator.state = sampler["rng"]
+            self._pool = SegmentPool(self._settings.model_pool_size)
+            if sampler["pool"] is not None:
+                self._pool.set_state(sampler["pool"])
         if hasattr(self, "_real"):  # restored GRUs: the real segments' hidden states anew
             self._refresh_hiddens()
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -210,6 +211,20 @@ class SegmentPool:
             self.data[k][idx] = v
         self.pointer = int((self.pointer + n) % self.capacity)
         self.size = min(self.capacity, self.size + n)
+
+    def get_state(self) -> dict[str, Any]:
+        """The pool's segments and ring position (for checkpoints)."""
+        data = {k: v[: self.size] for k, v in self.data.items()}
+        return {"pointer": self.pointer, "data": data}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Back to a `get_state()` (of a pool of any capacity: the newest segments are kept)."""
+        self.data, self.pointer, self.size = {}, 0, 0
+        data = state["data"]
+        n = len(next(iter(data.values()))) if data else 0
+        if n:  # oldest first (from the ring position), so that `add` keeps the newest
+            order = np.roll(np.arange(n), -int(state["pointer"]))
+            self.add({k: v[order] for k, v in data.items()})
 
     def sample(self, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         """`n` segments drawn uniformly with replacement."""

@@ -35,6 +35,11 @@ class MapleSettings:
     """Model rollouts started per training iteration (one iteration = `steps_per_iteration`)."""
     model_pool_size: int = 250_000
     """Model segments kept (a ring buffer)."""
+    checkpoint_model_pool: bool = False
+    """Also save the model pool in checkpoints (~2 KB per segment at h 10: ~0.5 GB at the
+    default size), so that a restored run trains on the pool it had; False (as RLlib's
+    `store_buffer_in_checkpoints`): a restored run starts from an empty pool, refilled by its
+    next iterations' rollouts."""
     steps_per_iteration: int = 1000
     """SAC gradient steps per training iteration (the port's `in_train_epoch`)."""
     hidden_refresh_every: int = 4
@@ -84,7 +89,8 @@ class MapleSettings:
         return dataclasses.asdict(self)
 
     def validate(self) -> None:
-        _check(self, "context", lambda v: isinstance(v, bool), "true or false")
+        for key in ("context", "checkpoint_model_pool"):
+            _check(self, key, lambda v: isinstance(v, bool), "true or false")
         for key in (
             "horizon",
             "rollout_batch_size",

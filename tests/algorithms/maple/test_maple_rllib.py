@@ -145,6 +145,27 @@ def test_checkpoint_round_trip_restores_ensemble_networks_discriminator_and_stat
         restored.stop()
 
 
+@pytest.mark.parametrize("keep_pool", [True, False])
+def test_restored_maple_goes_on_with_its_sampler_and_optionally_its_model_pool(
+    parts, tmp_path, keep_pool
+):
+    cfg = _config(parts, tmp_path, evaluation_interval=0, checkpoint_model_pool=keep_pool)
+    algo = cfg.build_algo()
+    try:
+        assert algo.train()["maple"]["model_pool_segments"] == 64
+        path = algo.save_to_path(str(tmp_path / "ckpt"))
+        draws = algo._rng.integers(0, 1 << 30, size=8)
+    finally:
+        algo.stop()
+    restored = Algorithm.from_checkpoint(path)
+    try:
+        np.testing.assert_array_equal(restored._rng.integers(0, 1 << 30, size=8), draws)
+        pool = restored.train()["maple"]["model_pool_segments"]
+        assert pool == (128 if keep_pool else 64)
+    finally:
+        restored.stop()
+
+
 def test_mopo_is_maple_without_context_and_runs_statelessly(parts, tmp_path):
     algo = _config(parts, tmp_path, rllib_asor.MopoConfig, evaluation_interval=0).build_algo()
     try:
@@ -177,6 +198,10 @@ def test_maple_policy_refuses_stateless_inference(parts, tmp_path):
         ({"ensemble_elites": 9}, r"maple.ensemble_elites=9 is invalid: allowed an integer <= "),
         ({"horizn": 5}, r"maple.horizn is not a MAPLE setting \(did you mean 'horizon'\?\)"),
         ({"context": "yes"}, r"maple.context='yes' is invalid: allowed true or false"),
+        (
+            {"checkpoint_model_pool": 1},
+            r"maple.checkpoint_model_pool=1 is invalid: allowed true or false",
+        ),
         ({"actor_lr": float("nan")}, r"maple.actor_lr=nan is invalid: allowed a number > 0"),
         (
             {"penalty_coef": float("inf")},

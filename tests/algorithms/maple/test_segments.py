@@ -106,6 +106,23 @@ def test_mix_is_5_percent_real_and_95_percent_model_segments() -> None:
     assert batch["obs"].shape[1] == batch["valid"].sum(1).max()
 
 
+def test_pool_state_round_trip_keeps_the_ring_order_and_the_newest_segments() -> None:
+    pool = SegmentPool(4)
+    for i in range(6):  # wraps: holds 2, 3, 4, 5 with the oldest (2) at the pointer
+        pool.add({"obs": np.full((1, 3, 2), i, np.float32)})
+    same = SegmentPool(4)
+    same.set_state(pool.get_state())
+    assert len(same) == 4
+    same.add({"obs": np.full((1, 3, 2), 6, np.float32)})  # overwrites the oldest: 2
+    assert sorted(same.data["obs"][:, 0, 0].tolist()) == [3, 4, 5, 6]
+    smaller = SegmentPool(2)
+    smaller.set_state(pool.get_state())
+    assert sorted(smaller.data["obs"][:, 0, 0].tolist()) == [4, 5]
+    empty = SegmentPool(4)
+    empty.set_state(SegmentPool(4).get_state())
+    assert len(empty) == 0
+
+
 def _segment_batch(nets: MapleNetworks, b: int = 6, t: int = 4) -> dict[str, torch.Tensor]:
     g = torch.Generator().manual_seed(0)
     valid = torch.ones(b, t, dtype=torch.bool)
