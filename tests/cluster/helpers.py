@@ -13,6 +13,10 @@ from rllib_asor.registry.env_names import register_env
 
 LAVA = "rllib_asor/LavaWorld-v0"
 ASOR_KEYS = ("disc_loss", "disc_acc", "aug_reward_mean", "real_fraction", "rnd_loss")
+RESTART_DEADLINE_S = 180
+"""How long a test trains while it waits for a restarted runner: a new Ray worker imports torch
+and RLlib first, which took over 60 s on the 2-core machine loaded with two other jobs (a
+restart that never comes still fails the test)."""
 
 
 def lava_ppo_asor(env: str = LAVA, env_config: dict | None = None, **runners: Any) -> Any:
