@@ -230,15 +230,15 @@ def _save_partial(algo: Any, partial: Path, state: dict[str, Any]) -> None:
     """The run so far: the algorithm checkpoint into the folder the current state does not name,
     then (atomically) the state naming it, then the previous checkpoint goes; a run killed at
     any point keeps a state and the checkpoint it names."""
+    from benchmarks.common import write_json
+
     partial.mkdir(parents=True, exist_ok=True)
     state_file = partial / "state.json"
     current = json.loads(state_file.read_text())["checkpoint"] if state_file.exists() else None
     name = "algo-b" if current == "algo-a" else "algo-a"
     shutil.rmtree(partial / name, ignore_errors=True)
     algo.save_to_path(str(partial / name))
-    tmp = partial / "state.tmp"
-    tmp.write_text(json.dumps({**state, "checkpoint": name}))
-    os.replace(tmp, state_file)
+    write_json(state_file, {**state, "checkpoint": name})  # atomic: temp file, then rename
     if current:
         shutil.rmtree(partial / current, ignore_errors=True)
 
