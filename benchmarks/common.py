@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -34,12 +36,38 @@ def start_local_ray(num_cpus: int = 2) -> None:
 def write_json(path: Path, data: Any) -> None:
     """Write `data` as JSON to `path` atomically (a temp file renamed into place), so an
     interrupted benchmark never leaves a half-written run file that a rerun would skip."""
-    import json
-
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(data))
     os.replace(tmp, path)
+
+
+def save_partial(partial: Path, state: dict[str, Any], save: Callable[[Path], None]) -> None:
+    """Save an unfinished run: `save(folder)` writes the checkpoint into an empty folder, the
+    one the current state does not name (`algo-a` / `algo-b` in turn); then the state naming
+    it replaces the old one atomically; then the previous checkpoint goes. A run killed at any
+    moment keeps a state and the complete checkpoint it names (`load_partial`)."""
+    partial.mkdir(parents=True, exist_ok=True)
+    current = load_partial(partial)
+    old = current[1] if current else None
+    name = "algo-b" if old == partial / "algo-a" else "algo-a"
+    shutil.rmtree(partial / name, ignore_errors=True)
+    (partial / name).mkdir()
+    save(partial / name)
+    write_json(partial / "state.json", {**state, "checkpoint": name})
+    if old is not None and old != partial:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def load_partial(partial: Path) -> tuple[dict[str, Any], Path] | None:
+    """The last `save_partial` of a run: (its state, its checkpoint folder), or None if the run
+    was never saved. A state without a `checkpoint` (saved before the folders alternated)
+    names `partial` itself."""
+    state_file = partial / "state.json"
+    if not state_file.exists():
+        return None
+    state = json.loads(state_file.read_text())
+    return state, partial / state.get("checkpoint", "")
 
 
 def run_if_missing(path: Path, label: str, run: Callable[[], dict[str, Any]]) -> None:

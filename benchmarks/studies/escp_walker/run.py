@@ -110,16 +110,23 @@ def run_one(method: str, seed: int, args: argparse.Namespace, partial: Path) -> 
     """
     import pickle
 
+    from benchmarks.common import load_partial, save_partial
+
     config = build_config(method, seed, args)
     algo = config.build_algo()
+
+    def save(folder: Path) -> None:  # the algorithm and (not in RLlib's checkpoint) its replay
+        algo.save_to_path(str(folder / "algo"))
+        with open(folder / "replay.pkl", "wb") as f:
+            pickle.dump(algo.local_replay_buffer.get_state(), f)
+
     curve: list[dict[str, Any]] = []
     steps, spent = 0, 0.0
     offset: int | None = 0
-    state_file = partial / "state.json"
-    if state_file.exists():
-        saved = json.loads(state_file.read_text())
-        algo.restore_from_path(str(partial / "algo"))
-        with open(partial / "replay.pkl", "rb") as f:
+    if (found := load_partial(partial)) is not None:
+        saved, checkpoint = found
+        algo.restore_from_path(str(checkpoint / "algo"))
+        with open(checkpoint / "replay.pkl", "rb") as f:
             algo.local_replay_buffer.set_state(pickle.load(f))
         curve, steps, spent = saved["curve"], saved["steps"], saved["train_wall_s"]
         offset = None  # known after the first iteration: did the checkpoint keep the counter?
@@ -136,7 +143,8 @@ def run_one(method: str, seed: int, args: argparse.Namespace, partial: Path) -> 
             if steps >= next_eval and steps < args.steps:
                 curve.append({"steps": steps, **evaluate(algo, seed, args, final=False)})
                 next_eval += args.eval_every
-                _save_partial(algo, partial, curve, steps, time.time() - t0)
+                state = {"curve": curve, "steps": steps, "train_wall_s": time.time() - t0}
+                save_partial(partial, state, save)
                 print(f"  {method}-{seed} {steps} steps, {time.time() - t0:.0f}s", flush=True)
         wall = time.time() - t0
         final = evaluate(algo, seed, args, final=True)
@@ -154,20 +162,6 @@ def run_one(method: str, seed: int, args: argparse.Namespace, partial: Path) -> 
         "settings": settings(args),
         "resumed": bool(spent),
     }
-
-
-def _save_partial(algo: Any, partial: Path, curve: list, steps: int, wall: float) -> None:
-    """The run so far: algorithm checkpoint, replay buffer, then (last, atomically) the state."""
-    import pickle
-
-    partial.mkdir(parents=True, exist_ok=True)
-    algo.save_to_path(str(partial / "algo"))
-    with open(partial / "replay.tmp", "wb") as f:
-        pickle.dump(algo.local_replay_buffer.get_state(), f)
-    os.replace(partial / "replay.tmp", partial / "replay.pkl")
-    tmp = partial / "state.tmp"
-    tmp.write_text(json.dumps({"curve": curve, "steps": steps, "train_wall_s": wall}))
-    os.replace(tmp, partial / "state.json")
 
 
 def settings(args: argparse.Namespace) -> dict[str, Any]:

@@ -164,6 +164,8 @@ def run_one(
     continued from there when a run was saved."""
     import numpy as np
 
+    from benchmarks.common import load_partial, save_partial
+
     cfg = (
         cql_config(dataset, seed, args)
         if method == "cql"
@@ -172,11 +174,10 @@ def run_one(
     t0 = time.time()
     algo = cfg.build_algo()
     setup_s = time.time() - t0
-    state_file = partial / "state.json"
     curve, done, spent, resumed_at = [], 0, 0.0, []
-    if state_file.exists():
-        saved = json.loads(state_file.read_text())
-        algo.restore_from_path(str(partial / saved["checkpoint"]))
+    if (found := load_partial(partial)) is not None:
+        saved, checkpoint = found
+        algo.restore_from_path(str(checkpoint))
         curve, done, spent = saved["curve"], saved["iteration"], saved["train_s"]
         resumed_at = [*saved["resumed_at"], done]
         print(f"  {dataset}/{method}/{seed}: resumed after iteration {done}", flush=True)
@@ -189,8 +190,13 @@ def run_one(
             if np.isfinite(score):  # iterations without an evaluation report NaN
                 curve.append({"iteration": i + 1, "score": score})
             if i + 1 < args.iters:
-                state = {"curve": curve, "iteration": i + 1, "resumed_at": resumed_at}
-                _save_partial(algo, partial, {**state, "train_s": time.time() - t1})
+                state = {
+                    "curve": curve,
+                    "iteration": i + 1,
+                    "resumed_at": resumed_at,
+                    "train_s": time.time() - t1,
+                }
+                save_partial(partial, state, lambda folder: algo.save_to_path(str(folder)))
             print(
                 f"  {dataset}/{method}/{seed} iter {i + 1}/{args.iters} "
                 f"t={time.time() - t1:.0f}s {curve[-1] if curve else ''}",
@@ -224,23 +230,6 @@ def run_one(
         "maple_last": scalars(last.get("maple")),
         "asor_last": scalars(last.get("asor")),
     }
-
-
-def _save_partial(algo: Any, partial: Path, state: dict[str, Any]) -> None:
-    """The run so far: the algorithm checkpoint into the folder the current state does not name,
-    then (atomically) the state naming it, then the previous checkpoint goes; a run killed at
-    any point keeps a state and the checkpoint it names."""
-    from benchmarks.common import write_json
-
-    partial.mkdir(parents=True, exist_ok=True)
-    state_file = partial / "state.json"
-    current = json.loads(state_file.read_text())["checkpoint"] if state_file.exists() else None
-    name = "algo-b" if current == "algo-a" else "algo-a"
-    shutil.rmtree(partial / name, ignore_errors=True)
-    algo.save_to_path(str(partial / name))
-    write_json(state_file, {**state, "checkpoint": name})  # atomic: temp file, then rename
-    if current:
-        shutil.rmtree(partial / current, ignore_errors=True)
 
 
 def _locked_by_other(lock: Path) -> bool:
