@@ -21,9 +21,10 @@ every later run trains on these (`--data` points elsewhere if you want your own 
 - `cql`: the project's CQL (tuned_examples/offline/cql-hopper.yaml, fast path) for the same
   number of gradient steps.
 MAPLE, both MAPLE+ASOR and MOPO of one (dataset, seed) load the same cached ensemble (trained by
-whichever runs first; run the `maple` jobs first or one process per dataset). The ensembles
-are committed (`ensembles/`, keyed by the data's bytes and the ensemble settings), so the
-methods of one seed may run in different sessions and still share theirs.
+whichever runs first; run the `maple` jobs first, or `--ensembles-only` first, or one process
+per dataset). The ensembles are committed (`ensembles/`, keyed by the data's bytes and the
+ensemble settings), so the methods of one seed may run in different sessions and still share
+theirs.
 
 Score: the deterministic policy, `--eval-episodes` episodes under each dynamics, D4RL-normalised
 against the dataset's own random and expert returns (`rllib_asor.data.scoring.normalized_score`),
@@ -277,6 +278,12 @@ def main(argv: list[str] | None = None) -> None:
         "so that the methods of one seed can run in different sessions and still share it",
     )
     p.add_argument("--runs", default=str(HERE / "runs"))
+    p.add_argument(
+        "--ensembles-only",
+        action="store_true",
+        help="only train (or find) the cached ensembles of --datasets x --seeds, then exit: the "
+        "methods of one seed can then run in parallel processes on one ensemble",
+    )
     args = p.parse_args(argv)
 
     from rllib_asor.data.format import read_manifest
@@ -291,6 +298,12 @@ def main(argv: list[str] | None = None) -> None:
     from benchmarks.common import start_local_ray, write_json
 
     start_local_ray(num_cpus=4)  # CQL: Ray Data takes a read task and two OfflinePreLearner actors
+    if args.ensembles_only:
+        for seed in args.seeds:
+            for dataset in args.datasets:
+                maple_config("maple", dataset, seed, args).build_algo().stop()
+                print(f"ensemble of {dataset} seed {seed} in {args.ensemble_cache}", flush=True)
+        return
     runs = Path(args.runs)
     runs.mkdir(parents=True, exist_ok=True)
     for seed in args.seeds:
