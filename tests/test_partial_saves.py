@@ -21,7 +21,7 @@ def write_checkpoint(step: int):
     return save
 
 
-def checkpoint_step(folder: Path) -> tuple[str, str]:
+def checkpoint_contents(folder: Path) -> tuple[str, str]:
     return (folder / "weights").read_text(), (folder / "replay").read_text()
 
 
@@ -37,7 +37,7 @@ def test_each_save_is_loaded_with_its_own_checkpoint_and_only_one_checkpoint_is_
         save_partial(partial, {"iteration": step}, write_checkpoint(step))
         state, folder = load_partial(partial)
         assert state["iteration"] == step
-        assert checkpoint_step(folder) == (f"weights {step}", f"replay {step}")
+        assert checkpoint_contents(folder) == (f"weights {step}", f"replay {step}")
         assert sorted(p.name for p in partial.iterdir()) == [folder.name, "state.json"]
 
 
@@ -54,12 +54,12 @@ def test_a_save_killed_halfway_leaves_the_previous_save_whole(tmp_path: Path) ->
         save_partial(partial, {"iteration": 3}, killed)
     state, folder = load_partial(partial)
     assert state["iteration"] == 2
-    assert checkpoint_step(folder) == ("weights 2", "replay 2")
+    assert checkpoint_contents(folder) == ("weights 2", "replay 2")
 
     # the next save after the resume overwrites the broken folder, not the good one
     save_partial(partial, {"iteration": 3}, write_checkpoint(3))
     state, folder = load_partial(partial)
-    assert (state["iteration"], checkpoint_step(folder)) == (3, ("weights 3", "replay 3"))
+    assert (state["iteration"], checkpoint_contents(folder)) == (3, ("weights 3", "replay 3"))
 
 
 def test_a_save_from_before_the_folders_alternated_is_read_from_the_run_folder(
@@ -70,9 +70,9 @@ def test_a_save_from_before_the_folders_alternated_is_read_from_the_run_folder(
     write_checkpoint(7)(partial)
     (partial / "state.json").write_text(json.dumps({"steps": 7}))
     state, folder = load_partial(partial)
-    assert state == {"steps": 7} and checkpoint_step(folder) == ("weights 7", "replay 7")
+    assert state == {"steps": 7} and checkpoint_contents(folder) == ("weights 7", "replay 7")
 
     save_partial(partial, {"steps": 8}, write_checkpoint(8))
     state, folder = load_partial(partial)
-    assert (state["steps"], checkpoint_step(folder)) == (8, ("weights 8", "replay 8"))
+    assert (state["steps"], checkpoint_contents(folder)) == (8, ("weights 8", "replay 8"))
     assert folder != partial
