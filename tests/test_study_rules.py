@@ -7,6 +7,7 @@ import importlib.util
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -42,6 +43,13 @@ def test_a_pair_from_two_data_builds_is_refused(tmp_path: Path) -> None:
     write_run(tmp_path, "maple_asor_paper", 0, "bbbb", 40.0)
     with pytest.raises(SystemExit, match=r"medium/0.*aaaa.*bbbb"):
         summariser("maple_hopper").load(tmp_path)
+
+
+def test_late_score_averages_the_second_half_of_the_curve_only() -> None:
+    curve = [{"iteration": i, "score": float(i)} for i in (5, 10, 15, 20)]
+    late = summariser("maple_hopper").late_score
+    assert late({"iters": 20, "curve": curve}) == 17.5  # iterations 15 and 20, not 10
+    assert np.isnan(late({"iters": 20, "curve": curve[:2]}))  # nothing after half: no value
 
 
 # ------------------------------------------------------- ESCP: the validity bar, then the rule
