@@ -50,6 +50,8 @@ def test_late_score_averages_the_second_half_of_the_curve_only() -> None:
     late = summariser("maple_hopper").late_score
     assert late({"iters": 20, "curve": curve}) == 17.5  # iterations 15 and 20, not 10
     assert np.isnan(late({"iters": 20, "curve": curve[:2]}))  # nothing after half: no value
+    gaps = [*curve, {"iteration": 16, "score": float("nan")}]  # the first runs' NaN points
+    assert late({"iters": 20, "curve": gaps}) == 17.5
 
 
 # ------------------------------------------------------- ESCP: the validity bar, then the rule

@@ -76,8 +76,13 @@ def compare(lo: float, hi: float, a: str, b: str) -> str:
 
 
 def late_score(run: dict[str, Any]) -> float:
-    """The mean of a run's evaluations after half its iterations (the curve's points there)."""
-    late = [c["score"] for c in run["curve"] if c["iteration"] > run["iters"] / 2]
+    """The mean of a run's evaluations after half its iterations (the curve's points there;
+    the first runs' curves also list the iterations without an evaluation, as NaN)."""
+    late = [
+        c["score"]
+        for c in run["curve"]
+        if c["iteration"] > run["iters"] / 2 and np.isfinite(c["score"])
+    ]
     return float(np.mean(late)) if late else float("nan")
 
 
