@@ -54,6 +54,19 @@ def test_late_score_averages_the_second_half_of_the_curve_only() -> None:
     assert late({"iters": 20, "curve": gaps}) == 17.5
 
 
+def test_the_runner_skips_a_seed_whose_runs_used_other_data(tmp_path: Path) -> None:
+    spec = importlib.util.spec_from_file_location(
+        "maple_run", ROOT / "benchmarks/studies/maple_hopper/run.py"
+    )
+    run = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(run)
+    write_run(tmp_path, "maple", 0, "old", 50.0)
+    write_run(tmp_path, "maple", 1, "new", 50.0)
+    assert run.runs_on_other_data(tmp_path, "medium", 0, "new") == ["medium-maple-0.json"]
+    assert run.runs_on_other_data(tmp_path, "medium", 1, "new") == []
+    assert run.runs_on_other_data(tmp_path, "random", 0, "new") == []
+
+
 # ------------------------------------------------------- ESCP: the validity bar, then the rule
 def escp_summary(runs: Path) -> dict:
     return summariser("escp_walker").summarise(runs)

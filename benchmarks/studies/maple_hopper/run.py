@@ -233,6 +233,18 @@ def run_one(
     }
 
 
+def runs_on_other_data(runs: Path, dataset: str, seed: int, fingerprint: str) -> list[str]:
+    """The finished runs of this (dataset, seed) that trained on other rows: a new run here
+    could not pair with them (summarise.py refuses a (dataset, seed) from two data builds)."""
+    return [
+        path.name
+        for path in sorted(runs.glob(f"{dataset}-*-{seed}.json"))
+        if (r := json.loads(path.read_text()))["dataset"] == dataset
+        and int(r["seed"]) == seed
+        and r.get("data_fingerprint") != fingerprint
+    ]
+
+
 def _locked_by_other(lock: Path) -> bool:
     if not lock.exists():
         return False
@@ -306,12 +318,20 @@ def main(argv: list[str] | None = None) -> None:
         return
     runs = Path(args.runs)
     runs.mkdir(parents=True, exist_ok=True)
+    prints = {ds: data_fingerprint(parts(args, ds)) for ds in args.datasets}
     for seed in args.seeds:
         for dataset in args.datasets:
             for method in args.methods:
                 name = f"{dataset}-{method}-{seed}"
                 out, lock = runs / f"{name}.json", runs / f"{name}.lock"
                 if out.exists() or _locked_by_other(lock):
+                    continue
+                if other := runs_on_other_data(runs, dataset, seed, prints[dataset]):
+                    print(
+                        f"skip {name}: {', '.join(other)} trained on another build of the "
+                        f"data, so this run could not pair with them; use another seed",
+                        flush=True,
+                    )
                     continue
                 lock.write_text(str(os.getpid()))
                 try:
