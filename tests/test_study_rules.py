@@ -13,10 +13,10 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def summariser(study: str):
-    """benchmarks/studies/<study>/summarise.py as a module (the studies are not a package)."""
-    path = ROOT / f"benchmarks/studies/{study}/summarise.py"
-    spec = importlib.util.spec_from_file_location(f"{study}_summarise", path)
+def study_script(study: str, script: str = "summarise"):
+    """benchmarks/studies/<study>/<script>.py as a module (the studies are not a package)."""
+    path = ROOT / f"benchmarks/studies/{study}/{script}.py"
+    spec = importlib.util.spec_from_file_location(f"{study}_{script}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -33,7 +33,7 @@ def test_seeds_from_different_data_builds_still_pair(tmp_path: Path) -> None:
     for seed, fp in [(0, "aaaa"), (1, "bbbb")]:
         write_run(tmp_path, "maple", seed, fp, 50.0 + seed)
         write_run(tmp_path, "maple_asor_paper", seed, fp, 40.0 + seed)
-    data = summariser("maple_hopper").load(tmp_path)
+    data = study_script("maple_hopper").load(tmp_path)
     assert sorted(data[("medium", "maple")]) == [0, 1]
     assert data[("medium", "maple_asor_paper")][1]["score"] == 41.0
 
@@ -42,12 +42,12 @@ def test_a_pair_from_two_data_builds_is_refused(tmp_path: Path) -> None:
     write_run(tmp_path, "maple", 0, "aaaa", 50.0)
     write_run(tmp_path, "maple_asor_paper", 0, "bbbb", 40.0)
     with pytest.raises(SystemExit, match=r"medium/0.*aaaa.*bbbb"):
-        summariser("maple_hopper").load(tmp_path)
+        study_script("maple_hopper").load(tmp_path)
 
 
 def test_late_score_averages_the_second_half_of_the_curve_only() -> None:
     curve = [{"iteration": i, "score": float(i)} for i in (5, 10, 15, 20)]
-    late = summariser("maple_hopper").late_score
+    late = study_script("maple_hopper").late_score
     assert late({"iters": 20, "curve": curve}) == 17.5  # iterations 15 and 20, not 10
     assert np.isnan(late({"iters": 20, "curve": curve[:2]}))  # nothing after half: no value
     gaps = [*curve, {"iteration": 16, "score": float("nan")}]  # the first runs' NaN points
@@ -55,11 +55,7 @@ def test_late_score_averages_the_second_half_of_the_curve_only() -> None:
 
 
 def test_the_runner_skips_a_seed_whose_runs_used_other_data(tmp_path: Path) -> None:
-    spec = importlib.util.spec_from_file_location(
-        "maple_run", ROOT / "benchmarks/studies/maple_hopper/run.py"
-    )
-    run = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(run)
+    run = study_script("maple_hopper", "run")
     write_run(tmp_path, "maple", 0, "old", 50.0)
     write_run(tmp_path, "maple", 1, "new", 50.0)
     assert run.runs_on_other_data(tmp_path, "medium", 0, "new") == ["medium-maple-0.json"]
@@ -69,7 +65,7 @@ def test_the_runner_skips_a_seed_whose_runs_used_other_data(tmp_path: Path) -> N
 
 # ------------------------------------------------------- ESCP: the validity bar, then the rule
 def escp_summary(runs: Path) -> dict:
-    return summariser("escp_walker").summarise(runs)
+    return study_script("escp_walker").summarise(runs)
 
 
 def write_escp_run(runs: Path, method: str, seed: int, stationary: float) -> None:
