@@ -159,10 +159,16 @@ def data_fingerprint(paths: list[str]) -> str:
 
 
 def run_one(
-    dataset: str, method: str, seed: int, args: argparse.Namespace, partial: Path
+    dataset: str,
+    method: str,
+    seed: int,
+    args: argparse.Namespace,
+    partial: Path,
+    fingerprint: str,
 ) -> dict[str, Any]:
     """Train one run for `args.iters` iterations, saved to `partial` after each one and
-    continued from there when a run was saved."""
+    continued from there when a run was saved; `fingerprint`: `data_fingerprint` of the
+    dataset's parts (the runner hashes each dataset once)."""
     import numpy as np
 
     from benchmarks.common import load_partial, save_partial
@@ -213,7 +219,7 @@ def run_one(
 
     return {
         "dataset": dataset,
-        "data_fingerprint": data_fingerprint(parts(args, dataset)),
+        "data_fingerprint": fingerprint,
         "method": method,
         "seed": seed,
         "iters": args.iters,
@@ -337,7 +343,7 @@ def main(argv: list[str] | None = None) -> None:
                 try:
                     print(f"run {name}", flush=True)
                     partial = runs / f"{name}.partial"
-                    res = run_one(dataset, method, seed, args, partial)
+                    res = run_one(dataset, method, seed, args, partial, prints[dataset])
                     write_json(out, res)
                     shutil.rmtree(partial, ignore_errors=True)
                     print(
