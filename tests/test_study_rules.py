@@ -54,6 +54,21 @@ def test_late_score_averages_the_second_half_of_the_curve_only() -> None:
     assert late({"iters": 20, "curve": gaps}) == 17.5
 
 
+def test_a_comparison_short_of_its_planned_pairs_is_interim(tmp_path: Path) -> None:
+    summarise = study_script("maple_hopper")
+    for seed, gain in enumerate([1.0, 20.0, 25.0, 130.0, 3.0]):  # every Δ positive
+        write_run(tmp_path, "maple", seed, "aaaa", 50.0)
+        write_run(tmp_path, "maple_asor", seed, "aaaa", 50.0 + gain)
+        data = summarise.load(tmp_path)
+        verdict = summarise.paired(data, "maple_asor", "maple", planned=5)["verdict"]
+        if seed < 2:
+            assert verdict == "not enough pairs"
+        elif seed < 4:  # the interval is above 0, but on fewer pairs than planned
+            assert verdict == f"interim, {seed + 1} of 5 pairs: reproduced (interval above 0)"
+        else:
+            assert verdict == "reproduced (interval above 0)"
+
+
 def test_the_runner_skips_a_seed_whose_runs_used_other_data(tmp_path: Path) -> None:
     run = study_script("maple_hopper", "run")
     write_run(tmp_path, "maple", 0, "old", 50.0)
