@@ -13,8 +13,9 @@ Applied to the paper preset (primary) and the robust default; "which preset the 
 favours": the same interval on Δ(robust − paper). MOPO and CQL are references (no test).
 A comparison with fewer pairs than it can have (the rule's 6; 5 for the methods that started
 after the data was committed, since medium seed 0 ran on an earlier build) is labelled interim:
-a bootstrap interval over 4 pairs lies above 0 whenever all 4 Δ are positive (1 chance in 16
-with no effect), so an interim interval is not the rule's verdict (label added in session 19).
+a bootstrap interval over 3-4 pairs lies above 0 whenever all Δ are positive (with no effect:
+1 chance in 8 or 16), so an interim interval is not the rule's verdict (label added in session
+19, after the robust form's 4th pair).
 One exploratory row, chosen after 3 pairs and not part of the rule: the same Δ on the mean of
 each run's evaluations in the second half of training (`late_score`), because single end points
 moved by ±20 within a run.
