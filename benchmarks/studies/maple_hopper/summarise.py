@@ -122,6 +122,9 @@ def paired(
     lo, hi = res.ci_low, res.ci_high
     if res.pairs < 3:
         lo = hi = float("nan")
+    label = verdict(lo, hi) if claim else compare(lo, hi, a, b)
+    if np.isfinite(lo) and res.pairs < planned:  # an interval, on fewer pairs than planned
+        label = f"interim, {res.pairs} of {planned} pairs: {label}"
     return {
         "a": a,
         "b": b,
@@ -133,15 +136,8 @@ def paired(
         "mean": res.diff_mean,
         "bca95": [lo, hi],
         "p": res.p_value,
-        "verdict": interim(verdict(lo, hi) if claim else compare(lo, hi, a, b), res.pairs, planned),
+        "verdict": label,
     }
-
-
-def interim(label: str, pairs: int, planned: int) -> str:
-    """`label`, marked interim while the comparison has fewer pairs than planned."""
-    if pairs < 3 or pairs >= planned:
-        return label
-    return f"interim, {pairs} of {planned} pairs: {label}"
 
 
 def summarise(runs: Path) -> dict[str, Any]:
