@@ -10,7 +10,8 @@ scipy, 5,000 resamples, fixed seed) and the Wilcoxon signed-rank p.
   Hopper gain, (+33 + +20) / 2 = +26.5);
 - otherwise inconclusive.
 Applied to the paper preset (primary) and the robust default; "which preset the evidence
-favours": the same interval on Δ(robust − paper). MOPO and CQL are references (no test).
+favours": the same interval on Δ(robust − paper). MOPO and CQL are references (no test; the
+rows MAPLE − MOPO and MAPLE − CQL check the base, the second added in session 20).
 A comparison with fewer pairs than it can have (the rule's 6; 5 for the methods that started
 after the data was committed, since medium seed 0 ran on an earlier build) is labelled interim:
 a bootstrap interval over 3-4 pairs lies above 0 whenever all Δ are positive (with no effect:
@@ -168,6 +169,7 @@ def summarise(runs: Path) -> dict[str, Any]:
         "asor_robust_vs_maple": paired(data, "maple_asor", "maple", 5),
         "robust_vs_paper": paired(data, "maple_asor", "maple_asor_paper", 5, claim=False),
         "maple_vs_mopo": paired(data, "maple", "mopo", 5, claim=False),
+        "maple_vs_cql": paired(data, "maple", "cql", 5, claim=False),
         "asor_paper_vs_maple_late": paired(
             data, "maple_asor_paper", "maple", 6, claim=False, metric="late_score"
         ),
@@ -193,14 +195,7 @@ def table(res: dict[str, Any]) -> str:
         "| comparison | score | pairs | mean Δ | 95 % BCa | Wilcoxon p | verdict |",
         "|---|---|---|---|---|---|---|",
     ]
-    for key in (
-        "asor_paper_vs_maple",
-        "asor_robust_vs_maple",
-        "robust_vs_paper",
-        "maple_vs_mopo",
-        "asor_paper_vs_maple_late",
-    ):
-        c = res[key]
+    for c in (v for k, v in res.items() if k != "rows"):  # the comparisons, in summarise's order
         lo, hi = c["bca95"]
         score = "late (exploratory)" if c["metric"] == "late_score" else "final (the rule)"
         lines.append(
