@@ -18,6 +18,10 @@ Rates are summed over rounds; each round runs every variant once (so machine loa
 alike), and the JSON keeps per-round rates. Run:
 
     nice -n 5 .venv/bin/python -m benchmarks.maple_speed --rounds 5 --out benchmarks/out/maple_speed
+
+On a GPU machine (the ensemble part alone needs no ray; the Learner part runs on the CPU):
+
+    python -m benchmarks.maple_speed --parts ensemble --device cuda --ensemble-steps 50
 """
 
 from __future__ import annotations
@@ -47,12 +51,12 @@ def _ensemble_speed(args: argparse.Namespace, rows: int) -> dict[str, Any]:
     from rllib_asor.algorithms.maple.ensemble import GaussianEnsemble, gaussian_nll, looped_forward
 
     torch.manual_seed(0)
-    k = 7
-    obs = torch.randn(k, rows, OBS)
-    act = torch.rand(k, rows, ACT) * 2 - 1
-    target = torch.cat([obs + 0.01 * torch.randn_like(obs), torch.randn(k, rows, 1)], -1)
-    batched = GaussianEnsemble(OBS, ACT, k, 5, 200, 4)
-    loop = GaussianEnsemble(OBS, ACT, k, 5, 200, 4)
+    k, dev = 7, torch.device(args.device)
+    obs = torch.randn(k, rows, OBS, device=dev)
+    act = torch.rand(k, rows, ACT, device=dev) * 2 - 1
+    target = torch.cat([obs + 0.01 * torch.randn_like(obs), torch.randn_like(obs[..., :1])], -1)
+    batched = GaussianEnsemble(OBS, ACT, k, 5, 200, 4).to(dev)
+    loop = GaussianEnsemble(OBS, ACT, k, 5, 200, 4).to(dev)
     loop.load_state_dict(batched.state_dict())
     singles = []
     for i in range(k):  # member i of the same weights as a network of its own
@@ -61,9 +65,9 @@ def _ensemble_speed(args: argparse.Namespace, rows: int) -> dict[str, Any]:
             n: (v[i : i + 1] if n.endswith(("weight", "bias")) and v.dim() == 3 else v)
             for n, v in batched.state_dict().items()
         }
-        state["elite_idx"] = torch.zeros(1, dtype=torch.long)
+        state["elite_idx"] = torch.zeros(1, dtype=torch.long, device=dev)
         one.load_state_dict(state)
-        singles.append(one)
+        singles.append(one.to(dev))
 
     def adamw(params: Any) -> Any:
         return torch.optim.AdamW(params, lr=1e-3, weight_decay=7.5e-5)
@@ -85,15 +89,22 @@ def _ensemble_speed(args: argparse.Namespace, rows: int) -> dict[str, Any]:
             for i, (m, o) in enumerate(zip(singles, opt_s, strict=True))
         ],
     }
+
+    def sync() -> None:  # a GPU runs asynchronously: time finished work only
+        if dev.type == "cuda":
+            torch.cuda.synchronize(dev)
+
     for fn in steps.values():  # warm-up
         for _ in range(3):
             fn()
     per_round: dict[str, list[float]] = {n: [] for n in steps}
     for _ in range(args.rounds):
         for n, fn in steps.items():
+            sync()
             t0 = time.perf_counter()
             for _ in range(args.ensemble_steps):
                 fn()
+            sync()
             per_round[n].append(args.ensemble_steps * k * rows / (time.perf_counter() - t0))
     rates = {n: float(np.mean(v)) for n, v in per_round.items()}
     speedup = {
@@ -107,6 +118,7 @@ def _ensemble_speed(args: argparse.Namespace, rows: int) -> dict[str, Any]:
         "speedup_median": speedup,
         "steps_per_round": args.ensemble_steps,
         "rows_per_member": rows,
+        "device": args.device,
     }
 
 
@@ -233,27 +245,31 @@ def learner_speed(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def table(res: dict[str, Any]) -> str:
-    ls = res["learners"]
-    lines = [
-        "| ensemble training (7 × 4×200), rows per member | batched | loop_forward | independent "
-        "| batched ÷ loop_forward | batched ÷ independent |",
-        "|---|---|---|---|---|---|",
-    ]
-    for rows, e in res["ensemble"].items():
-        r, x = e["samples_per_s"], e["speedup_median"]
-        lines.append(
-            f"| {rows} | {r['batched']:,.0f} | {r['loop_forward']:,.0f} | {r['independent']:,.0f} "
-            f"| {x['loop_forward']:.2f}× | {x['independent']:.2f}× |"
-        )
-    lines += [
-        "",
-        "| Learner, batch 256 | gradient steps/s | ÷ CQL (median) | state rows per step |",
-        "|---|---|---|---|",
-        *(
-            f"| {n} | {r:.1f} | {ls['ratio_to_cql_median'][n]:.2f} | {ls['state_rows_per_step'][n]:,} |"
-            for n, r in ls["gradient_steps_per_s"].items()
-        ),
-    ]
+    lines = []
+    if "ensemble" in res:
+        lines += [
+            "| ensemble training (7 × 4×200), rows per member | batched | loop_forward "
+            "| independent | batched ÷ loop_forward | batched ÷ independent |",
+            "|---|---|---|---|---|---|",
+        ]
+        for rows, e in res["ensemble"].items():
+            r, x = e["samples_per_s"], e["speedup_median"]
+            lines.append(
+                f"| {rows} | {r['batched']:,.0f} | {r['loop_forward']:,.0f} "
+                f"| {r['independent']:,.0f} | {x['loop_forward']:.2f}× | {x['independent']:.2f}× |"
+            )
+    if "learners" in res:
+        ls = res["learners"]
+        lines += [
+            "",
+            "| Learner, batch 256 | gradient steps/s | ÷ CQL (median) | state rows per step |",
+            "|---|---|---|---|",
+            *(
+                f"| {n} | {r:.1f} | {ls['ratio_to_cql_median'][n]:.2f} "
+                f"| {ls['state_rows_per_step'][n]:,} |"
+                for n, r in ls["gradient_steps_per_s"].items()
+            ),
+        ]
     return "\n".join(lines)
 
 
@@ -269,6 +285,18 @@ def main(argv: list[str] | None = None) -> None:
         help="rows per member per step (the port trains with 256)",
     )
     p.add_argument("--updates", type=int, default=20)
+    p.add_argument(
+        "--device",
+        default="cpu",
+        help="torch device of the ensemble part, e.g. cuda (the Learner part runs on the CPU)",
+    )
+    p.add_argument(
+        "--parts",
+        nargs="+",
+        choices=["ensemble", "learners"],
+        default=["ensemble", "learners"],
+        help="what to measure; `ensemble` alone needs no ray",
+    )
     p.add_argument("--out", default="benchmarks/out/maple_speed")
     args = p.parse_args(argv)
     import torch
@@ -278,8 +306,8 @@ def main(argv: list[str] | None = None) -> None:
         "machine": {"platform": platform.platform(), "processor": platform.processor()},
         "torch_threads": 1,
         "args": vars(args),
-        "ensemble": ensemble_speed(args),
-        "learners": learner_speed(args),
+        **({"ensemble": ensemble_speed(args)} if "ensemble" in args.parts else {}),
+        **({"learners": learner_speed(args)} if "learners" in args.parts else {}),
     }
     write_json(Path(args.out) / "maple_speed.json", res)
     print(table(res))
