@@ -301,6 +301,11 @@ def main(argv: list[str] | None = None) -> None:
     args = p.parse_args(argv)
     import torch
 
+    try:
+        dev = torch.device(args.device)
+        torch.empty(1, device=dev)
+    except (RuntimeError, AssertionError) as err:
+        p.error(f"--device {args.device!r} is not usable here ({err}); try cpu or cuda")
     torch.set_num_threads(1)
     res = {
         "machine": {"platform": platform.platform(), "processor": platform.processor()},

@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -32,3 +34,12 @@ def test_the_ensemble_part_runs_without_importing_ray(tmp_path: Path) -> None:
     assert all(r > 0 for r in e["samples_per_s"].values())
     assert all(len(v) == 2 for v in e["per_round"].values())
     assert "| 16 |" in out.stdout and "Learner" not in out.stdout
+
+
+def test_an_unusable_device_is_refused_with_one_line(capsys) -> None:
+    from benchmarks.maple_speed import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--parts", "ensemble", "--device", "nodevice"])
+    assert exit_.value.code == 2
+    assert "--device 'nodevice' is not usable here" in capsys.readouterr().err
