@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import atexit
+import gc
 import json
 import os
 import shutil
@@ -31,6 +33,10 @@ def start_local_ray(num_cpus: int = 2) -> None:
         log_to_driver=False,
         configure_logging=False,
     )
+    # Registered after Ray's own shutdown hook, so it runs first: an algorithm left in a
+    # reference cycle (CQL's Ray Data batch iterator) is collected while Ray is still up, not
+    # after its shutdown, where it printed a harmless but alarming "Ray is not initialized".
+    atexit.register(gc.collect)
 
 
 def write_json(path: Path, data: Any) -> None:

@@ -38,7 +38,6 @@ and at the end.
 from __future__ import annotations
 
 import argparse
-import gc
 import json
 import os
 import shutil
@@ -214,11 +213,6 @@ def run_one(
         final = evaluate_run(algo, method, args, args.eval_episodes)
     finally:
         algo.stop()
-        # Drop the algorithm while Ray is still up: CQL's Ray Data batch iterator then closes
-        # here, not at exit after Ray's shutdown, where it printed a harmless but alarming
-        # "Ray is not initialized" traceback.
-        algo = None
-        gc.collect()
 
     def scalars(d: Any) -> dict[str, float]:
         return {k: float(v) for k, v in (d or {}).items() if np.isscalar(v)}
