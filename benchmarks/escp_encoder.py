@@ -1,4 +1,4 @@
-"""Does ESCP's encoder do its job? (issue 23, item 3)
+"""Does ESCP's encoder do its job?
 
 1. **Tasks separate on held-out episodes.** After training, deterministic episodes (not in the
    replay buffer) on each of K training tasks; z at every step with a full window (t ≥ H).

@@ -1,4 +1,4 @@
-"""ESCP speed side by side (issue 23, item 5): ESCP and ESCP+ASOR vs the project's fast SAC
+"""ESCP speed side by side: ESCP and ESCP+ASOR vs the project's fast SAC
 (and Stable-Baselines3 SAC when installed), env steps/s while learning, in one process.
 
 All runners train on `rllib_asor/Walker2dShift-v0` with 40 gravity tasks (ESCP needs

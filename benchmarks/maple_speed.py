@@ -1,4 +1,4 @@
-"""MAPLE speed side by side (issue 24), one process, one torch thread, interleaved rounds.
+"""MAPLE speed side by side, one process, one torch thread, interleaved rounds.
 
 1. **Ensemble training**, samples/s: MOPO's ensemble (7 members, 4×200 swish, Hopper's 11-d
    state and 3-d action, 256 rows per member per step as the port, and 64 and 32) trained with all members in one batched

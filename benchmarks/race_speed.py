@@ -1,4 +1,4 @@
-"""Race PPO(+ASOR) end to end, side by side across source trees (issue 11).
+"""Race PPO(+ASOR) end to end, side by side across source trees.
 
 One measurement = one fresh process that builds `benchmarks.race_learning.race_config` (the race
 network, a map drawn per episode, 1000-step episodes, train batch 1024, minibatch 256, 4 epochs,
@@ -7,7 +7,7 @@ then times `--iters` calls of `algo.train()` by the wall clock: env steps/s end 
 (sampling, connectors, forward passes, the learner update, ASOR's piece, metrics). The default
 warm-up (24 iterations) measures ASOR's steady state: the first race episodes end after ~16
 iterations (1000 steps per env), and from then on the archive's states join the
-discriminator's batch (measurements before session 7 used 2, the archive-empty start).
+discriminator's batch (older measurements used 2, the archive-empty start).
 
 `--trees A B ...` measures each source tree (a checkout, e.g. `git worktree add /tmp/old <commit>`)
 in turn, `--rounds` times, interleaved (A, B, A, B, ...), so load drifts hit every tree alike;
@@ -56,7 +56,7 @@ NETS: dict[str, dict[str, Any]] = {
     "small": {"cnn_channels": [8, 16], "attn_token_size": 8},
 }
 """Race network → `model_config` over `RaceNetModule`'s defaults. `small`: half the CNN channels
-and half as many attention tokens (its success rate: docs/results.md, issue 11)."""
+and half as many attention tokens (its success rate: docs/results.md, the race speed row)."""
 
 
 def measure_here(args: argparse.Namespace) -> dict[str, Any]:
@@ -94,7 +94,7 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
     switches += [(("algorithms.ppo.lean", "rllib.lean_ppo"), "drop_bootstrap_rows")] if drop else []
     for modules, name in switches:
         switch = None
-        for module in modules:  # this tree's path, then the one before issue 22
+        for module in modules:  # this tree's path, then the package's earlier one
             try:
                 switch = getattr(importlib.import_module(f"rllib_asor.{module}"), name)
                 break

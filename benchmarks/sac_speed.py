@@ -1,4 +1,4 @@
-"""SAC speed side by side (issue 11): Stable-Baselines3 SAC vs our RLlib SAC vs SAC+ASOR.
+"""SAC speed side by side: Stable-Baselines3 SAC vs our RLlib SAC vs SAC+ASOR.
 
 Every runner trains on `rllib_asor/HopperShift-v0` (body mass, dof damping and wind drawn per
 episode) with the same settings: one local env, 256x256 ReLU MLPs for actor and twin critics,
@@ -19,7 +19,7 @@ Runners (`--runners`):
 - `asor`: `rllib_asor.with_asor(config)` (the robust default; fast path by default: the
   discriminator and RND take one minibatch per Learner call of 16 SAC steps).
 - `asor_every_step`: the same with `aux_epochs=1`: discriminator and RND trained with every SAC
-  gradient step (the fast path's default until session 5).
+  gradient step (an earlier default of the fast path).
 
 Stable-Baselines3 is a benchmark-only dependency (`pip install -e ".[bench]"`, which keeps torch
 pinned; it is never needed by `make test`). Run:

@@ -49,11 +49,11 @@ def __getattr__(name: str) -> Any:
         from rllib_asor.asor.config import AsorConfig
 
         return AsorConfig
-    if name in ("MapleConfig", "MopoConfig"):  # MAPLE / MOPO (issue 24), imported on first use
+    if name in ("MapleConfig", "MopoConfig"):  # MAPLE / MOPO, imported on first use
         from rllib_asor.algorithms.maple import maple
 
         return getattr(maple, name)
-    if name == "EscpConfig":  # ESCP (issue 23), imported on first use
+    if name == "EscpConfig":  # ESCP, imported on first use
         from rllib_asor.algorithms.escp.config import EscpConfig
 
         return EscpConfig

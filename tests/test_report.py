@@ -339,7 +339,7 @@ def test_group_by_dotted_param_key_still_splits_other_settings(fixture_results: 
 
 
 def test_trials_whose_settings_differ_are_never_seeds_of_one_group(tmp_path: Path) -> None:
-    """The issue's folder: a λ sweep at another budget, a single run and three seeds, all
+    """A mixed results folder: a λ sweep at another budget, a single run and three seeds, all
     PPO+ASOR: four groups, each labelled by what sets it apart, the keys listed in report.md."""
     asor = {"env": "MyEnv-v0", "rllib_asor_run": "PPO", "train_batch_size": 4000}
     for lam in (0.01, 0.1, 1.0):

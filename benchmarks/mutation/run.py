@@ -1,4 +1,4 @@
-"""Mutation testing, one package at a time (issue 27; docs/testing.md).
+"""Mutation testing, one package at a time (docs/testing.md).
 
     python -m benchmarks.mutation.run                  # every package of packages.toml, in order
     python -m benchmarks.mutation.run asor glue        # some of them

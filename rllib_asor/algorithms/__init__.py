@@ -5,7 +5,7 @@
 - `ppo/`: lean PPO (row dropping) and overlapped sampling;
 - `sac/`: the fast off-policy path (concat-MLP critics, flat replay, multi-step Learner calls);
 - `cql/`: offline inputs for CQL;
-- `escp/`, `maple/`, `mopo/`: the paper's other bases (issues 23 and 24).
+- `escp/`, `maple/`, `mopo/`: the paper's other bases.
 
 Nothing here imports ASOR: the glue in `rllib_asor.rllib` mixes ASOR into these Learners.
 """

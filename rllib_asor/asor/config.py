@@ -105,7 +105,7 @@ class AsorConfig:
     """Standardise the bonus, then clip it to ±`bonus_clip`: batch (robust: by this batch's
     mean/std, like PPO's advantage normalisation; keeps the bonus's size fixed relative to the
     reward scale however the discriminator drifts), running (by its running mean/std over all
-    batches so far; the robust default until session 4), or off (paper)."""
+    batches so far; an earlier robust default), or off (paper)."""
     shaping: str | None = None
     """potential (robust): r + λ·(γ·b(s′) − b(s)) (Ng et al. 1999: the optimal policy cannot
     change; b(s′) = 0 after termination); direct (paper): r + λ·b(s)."""

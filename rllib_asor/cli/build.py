@@ -168,7 +168,7 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
         if exp.asor is None and exp.run in ("SAC", "CQL"):  # with_asor does it for ASOR runs
             from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
 
-            # The fast off-policy path (docs/results.md, issue 11) unless the file opts out
+            # The fast off-policy path (docs/speed.md) unless the file opts out
             # with `learner_config_dict: {fast_off_policy: false}`.
             if (cfg.learner_config_dict or {}).get(FAST_KEY) is not False:
                 cfg = fast_off_policy(cfg)

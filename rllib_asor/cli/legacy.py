@@ -54,7 +54,8 @@ RENAMED_SPEC_KEYS: dict[str, tuple[str, str]] = {
     "local_dir": ("", "storage_path"),
 }
 
-# Our own class paths before issue 22's layout -> where they live now (YAML files keep working).
+# Our own class paths in the package's earlier layout -> where they live now (YAML files keep
+# working).
 MOVED_MODULES: dict[str, str] = {
     "rllib_asor.rllib.learner_speed": "rllib_asor.algorithms.common.learner_speed",
     "rllib_asor.rllib.pipeline": "rllib_asor.algorithms.common.pipeline",

@@ -1,4 +1,4 @@
-"""The fast off-policy path (issue 11): flat replay buffer, concat-MLP critics, several
+"""The fast off-policy path (docs/speed.md): flat replay buffer, concat-MLP critics, several
 gradient steps per Learner call at the same update-to-data ratio, and with_asor using it.
 
 The learning check (stock vs fast path on Pendulum, several seeds) is marked `slow`."""
@@ -344,7 +344,7 @@ def test_fast_data_path_learns_pendulum_like_the_stock_path(ray_session):
 def test_fast_path_with_concat_critics_learns_pendulum_at_least_as_well(ray_session):
     """The whole fast path (concat-MLP critics too): learns, and its mean return is not below
     the stock path's by more than 2 pooled seed standard deviations + 100 (3 seeds; measured
-    at 3,000 steps it was well above: docs/results.md, issue 11)."""
+    at 3,000 steps it was well above: docs/results.md, the SAC speed row)."""
     stock = [_pendulum_return("stock", s, STEPS) for s in SEEDS]
     fast = [_pendulum_return("fast", s, STEPS) for s in SEEDS]
     print(f"pendulum returns after {STEPS} steps: stock {stock} fast {fast}")
@@ -368,7 +368,7 @@ def test_sac_asor_with_one_aux_minibatch_per_call_learns_pendulum(ray_session):
 
 def test_fast_sac_asor_trains_on_a_remote_learner(ray_session):
     """FlatTransitions travel to a Learner actor (num_learners=1) like episodes do.
-    (2 DDP Learners with ASOR fail on RLlib's stock path as well: docs/results.md, issue 11.)"""
+    (2 DDP Learners with ASOR fail on RLlib's stock path as well: docs/algorithm.md.)"""
     config = rllib_asor.with_asor(_sac().learners(num_learners=1, num_cpus_per_learner=0.5))
     algo = config.build_algo()
     try:

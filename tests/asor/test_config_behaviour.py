@@ -1,4 +1,4 @@
-"""`AsorConfig`, setting by setting (issue 27): the documented defaults and presets, every
+"""`AsorConfig`, setting by setting: the documented defaults and presets, every
 boundary of every validated setting (the value just inside is taken, the one just outside is
 refused with a message naming key, value and what is allowed), the λ forms, `from_dict`'s
 alias and hints, and the helpers the rest of the package reads."""

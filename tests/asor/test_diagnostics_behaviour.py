@@ -1,5 +1,5 @@
 """What the ASOR update reports and the small pieces it is built from, on hand-set inputs
-(issue 27: each test aims at behaviour a mutation run showed untested).
+(each test aims at behaviour a mutation run showed untested).
 
 - the update's diagnostics (`_metrics`): every value, which keys appear for all-real,
   all-generated and mixed batches;

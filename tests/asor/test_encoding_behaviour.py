@@ -1,5 +1,5 @@
 """Flat features of every observation space the aux networks see, and one `AsorBatch` of
-several Learners' batches (issue 27, mutation survivors)."""
+several Learners' batches (mutation survivors)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Exact values of ASOR's small pieces on hand-made inputs (issue 27, mutation survivors):
+"""Exact values of ASOR's small pieces on hand-made inputs (mutation survivors):
 the discriminator's loss, statistics and regularisers, the archive's sampling, the partition's
 random mode and sizes, the bonus standardisation."""
 

@@ -1,4 +1,4 @@
-"""The visitation proxies on hand-set networks (issue 27): the RND error does not depend on an
+"""The visitation proxies on hand-set networks: the RND error does not depend on an
 affine change of the features once the normaliser has seen them, the per-dynamics count follows
 its rule (the least familiar dynamics seen so far), the ensemble's disagreement is exact."""
 

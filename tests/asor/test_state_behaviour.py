@@ -1,4 +1,4 @@
-"""ASOR's state through `asor_update` on hand-made batches (issue 27): the discriminator learns
+"""ASOR's state through `asor_update` on hand-made batches: the discriminator learns
 a separable batch, every piece of state survives a round trip by name and value (auto-λ
 among the cases), the archive is filled within the call that ends an episode."""
 

@@ -1,4 +1,4 @@
-"""Every legacy rename and move of `rllib_asor.cli.legacy`, driven by its own tables (issue 27):
+"""Every legacy rename and move of `rllib_asor.cli.legacy`, driven by its own tables:
 the new name is a real setting of the new API stack (a config attribute, a result key, a Tune
 checkpoint/run setting, an importable module) and the value lands there, with a warning naming
 both. New table entries are covered without touching this file."""

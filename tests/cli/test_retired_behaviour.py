@@ -1,7 +1,7 @@
 """The retired keys of old RLlib files (`rllib_asor.cli.retired`) and the rest of
 `legacy.translate_config`, each on its own: where the value lands, the one warning it gives
 (naming the file), and the one-line error (naming file and key) for a value it cannot take
-(issue 27: each test aims at behaviour a mutation run showed untested)."""
+(each test aims at behaviour a mutation run showed untested)."""
 
 from __future__ import annotations
 

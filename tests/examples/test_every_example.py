@@ -46,7 +46,7 @@ def test_example_parses_and_validates(path, monkeypatch):
 
 
 def test_plain_sac_and_cql_files_get_the_fast_off_policy_path(tmp_path):
-    """`rllib train file sac-hopper.yaml` gets the fast path (issue 11) without ASOR; a file can
+    """`rllib train file sac-hopper.yaml` gets the fast path (docs/speed.md) without ASOR; a file can
     opt out with `learner_config_dict: {fast_off_policy: false}`."""
     from rllib_asor.algorithms.sac.learner import FastSACTorchLearner
 

@@ -1,4 +1,4 @@
-"""Tuned examples for the online cross-dynamics families (issue 5): MuJoCo shift (SAC) and
+"""Tuned examples for the online cross-dynamics families: MuJoCo shift (SAC) and
 traffic density (PPO).
 
 Every file is loaded and validated by the CLI's own pre-Ray path (`experiment.load_file` +

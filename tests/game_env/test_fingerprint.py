@@ -1,6 +1,6 @@
 """The race behaves exactly as recorded: every scenario of ``fingerprint.py`` hashes the same.
 
-``fingerprint.json`` was recorded from the code before the game_env refactor (issue 13); a
+``fingerprint.json`` was recorded from the code before the game_env refactor; a
 refactor must leave every observation, reward, termination and info bit-identical. Re-record
 (``python -m tests.game_env.fingerprint --write``) only for an intended behaviour change, and
 say so in the commit. The hashes are of float bits on this platform's MuJoCo build.

@@ -1,6 +1,6 @@
 """Each of the race's seven reward terms: its sign, its size and what triggers it
 (docs/game_env.md, "Observation, action, reward, metrics"), on real physics with the racer
-placed by hand (issue 27: not only through the scenario fingerprint)."""
+placed by hand (not only through the scenario fingerprint)."""
 
 from __future__ import annotations
 

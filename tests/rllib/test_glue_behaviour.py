@@ -1,5 +1,5 @@
 """The ASOR ↔ RLlib glue on a real PPO Learner built in this process (no Ray started), fed
-hand-made episodes (issue 27): the discriminator is trained by the Learner's update, the archive
+hand-made episodes: the discriminator is trained by the Learner's update, the archive
 is filled in the update that ends the episodes, the rewards GAE sees are r + λ·b, every piece of
 ASOR state survives the Learner's checkpoint (auto-λ among the cases), the aux modules train
 their passes without changing the policy's minibatch count."""

@@ -1,5 +1,5 @@
 """The ASOR glue of the SAC family, built in this process (no Ray started) and fed hand-made
-transitions (issue 27): the SAC Learner's TD targets see r + λ·b with b from the discriminator
+transitions: the SAC Learner's TD targets see r + λ·b with b from the discriminator
 before its step, the aux modules train once per call, V(s) is the twin critics' minimum at π's
 deterministic action, the many-Learner helpers split rows as documented, and MAPLE's bonus
 follows each setting (normalisation, potential shaping, padding)."""

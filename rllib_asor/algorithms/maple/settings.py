@@ -1,7 +1,7 @@
 """`MapleSettings`: MAPLE's (and MOPO's) own hyperparameters, typed and validated.
 
 Defaults follow the PyTorch code MAPLE+SRPO runs on (`AIDefender/SRPO
-offlinerl/config/algo/maple_config_st.py`) where the issue (24) does not fix them, and MOPO's
+offlinerl/config/algo/maple_config_st.py`) except docs/maple.md's deviations, and MOPO's
 ensemble (`polixir/OfflineRL offlinerl/config/algo/mopo_config.py`: 7 members, 5 elites;
 `xionghuichen/MAPLE examples/config/d4rl/base_maple.py`: 4×200 swish). The same names are the
 YAML `maple:` block. A bad value raises ValueError naming the key, the value and what is allowed.

@@ -1,4 +1,4 @@
-"""The fast off-policy path for SAC and CQL (issue 11): what it changes and why.
+"""The fast off-policy path for SAC and CQL: what it changes and why.
 
 Profiled on Hopper (one local env, 256x256 networks, batch 256, one gradient step per env step;
 docs/results.md, "Fast experiments: SAC speed"), a stock RLlib 2.60 SAC gradient step cost

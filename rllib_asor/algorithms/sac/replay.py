@@ -2,7 +2,7 @@
 
 RLlib 2.60's `EpisodeReplayBuffer` keeps whole episodes and, for every sampled transition,
 slices a new one-step `SingleAgentEpisode` out of them; the Learner's connector pipeline then
-walks those 256 episodes again to build the train batch. Measured on Hopper (issue 11,
+walks those 256 episodes again to build the train batch. Measured on Hopper (docs/speed.md,
 docs/results.md) that was ~55 ms of buffer and ~19 ms of connector time per gradient step.
 
 `FlatReplayBuffer` stores each transition once, as rows of fixed arrays
