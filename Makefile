@@ -38,7 +38,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q --timeout=900
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks
+	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks studies
 
 # Offline datasets (docs/offline.md): per env and dynamics a PPO (or SAC) run, then random /
 # medium / expert / medium-replay data in data/offline/<task>/. Scale with the variables.

@@ -1,6 +1,6 @@
 """Race PPO(+ASOR) end to end, side by side across source trees.
 
-One measurement = one fresh process that builds `benchmarks.race_learning.race_config` (the race
+One measurement = one fresh process that builds `studies.lib.race_learning.race_config` (the race
 network, a map drawn per episode, 1000-step episodes, train batch 1024, minibatch 256, 4 epochs,
 ASOR's default of that tree with `obs_keys=[agent, destination]`), runs `--warmup` iterations,
 then times `--iters` calls of `algo.train()` by the wall clock: env steps/s end to end
@@ -11,7 +11,7 @@ discriminator's batch (older measurements used 2, the archive-empty start).
 
 `--trees A B ...` measures each source tree (a checkout, e.g. `git worktree add /tmp/old <commit>`)
 in turn, `--rounds` times, interleaved (A, B, A, B, ...), so load drifts hit every tree alike;
-each process imports `benchmarks` and `rllib_asor` from its tree (PYTHONPATH), this file is the
+each process imports `studies` and `rllib_asor` from its tree (PYTHONPATH), this file is the
 only code they share. Layouts (`--layouts`, `LAYOUTS`): `local` (race_learning's: sampling in
 the driver, 16 envs, one core), `runners2` (the race YAMLs': 2 env runners × 8 envs at 0.5 CPU
 each), `overlap1` / `overlap2` (1 × 16 or 2 × 8 with `OverlappedPPO`; skipped for trees
@@ -65,7 +65,10 @@ def measure_here(args: argparse.Namespace) -> dict[str, Any]:
     import torch
     from ray.rllib.core import DEFAULT_MODULE_ID
 
-    from benchmarks.race_learning import race_config
+    try:  # the study runner's home; older trees kept it under benchmarks/
+        from studies.lib.race_learning import race_config
+    except ImportError:
+        from benchmarks.race_learning import race_config
 
     torch.set_num_threads(args.learner_threads)
     runners, envs, overlap, drop = LAYOUTS[args.layout]

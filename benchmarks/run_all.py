@@ -2,8 +2,8 @@
 
 Each writes JSON + markdown under benchmarks/out/. Learning benchmarks take much longer and are
 run on their own (see docs/results.md for their commands):
-`benchmarks.lava_reproduction`, `benchmarks.race_learning`, `benchmarks.mujoco_shift`,
-`benchmarks.traffic_density`, `benchmarks/soak.py`.
+`studies.lib.lava_reproduction`, `studies.lib.race_learning`, `studies.lib.mujoco_shift`,
+`studies.lib.traffic_density` (studies/README.md), `benchmarks/soak.py`.
 """
 
 from __future__ import annotations

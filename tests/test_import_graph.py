@@ -161,3 +161,48 @@ def test_algorithms_know_nothing_of_asor_and_the_core_no_ray():
             names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
             names |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
             assert not {n for n in names if n == "ray" or n.startswith("ray.")}, module
+
+
+OUTSIDE = ("studies", "benchmarks")
+
+
+def outside_imports(path: Path) -> list[str]:
+    """Imports of the studies' or benchmarks' code in one file: `import` / `from` statements
+    (local ones too) and `importlib.import_module` / `spec_from_file_location` on their paths."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        names: list[str] = []
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            names = [node.module or ""]
+        elif isinstance(node, ast.Call) and getattr(node.func, "attr", getattr(node.func, "id", "")) in (
+            "import_module",
+            "spec_from_file_location",
+        ):
+            names = [
+                a.value.replace("/", ".")
+                for a in ast.walk(node)
+                if isinstance(a, ast.Constant) and isinstance(a.value, str)
+            ]
+        found += [f"{path.name}: {n}" for n in names if n.split(".")[0] in OUTSIDE]
+    return found
+
+
+def test_the_package_tests_import_no_study_or_benchmark():
+    """The package's tests stand alone: a study's or benchmark's tests live beside it."""
+    files = sorted((ROOT / "tests").rglob("*.py"))
+    assert len(files) > 20
+    assert [hit for path in files for hit in outside_imports(path)] == []
+
+
+def test_the_outside_import_check_sees_each_form(tmp_path):
+    bad = tmp_path / "test_bad.py"
+    bad.write_text(
+        "import studies.lib.compare\n"
+        "def f():\n    from benchmarks.common import write_json\n"
+        "import importlib\nimportlib.import_module('benchmarks.maple_speed')\n"
+        "importlib.util.spec_from_file_location('x', 'studies/escp_walker/summarise.py')\n"
+        "import rllib_asor\n"
+    )
+    assert len(outside_imports(bad)) == 4

@@ -470,14 +470,14 @@ def test_headline_columns_show_each_metric_once_without_per_map_copies() -> None
     ]
 
 
-def test_one_bootstrap_ci_for_reports_and_benchmarks() -> None:
-    """`rllib report` and the benchmark tables use the same interval (one implementation)."""
+def test_one_bootstrap_ci_for_reports_and_studies() -> None:
+    """`rllib report` uses `rllib_asor.report.stats.bootstrap_ci` (the studies' tables import the
+    same function: studies/tests/test_compare.py checks that side)."""
     import numpy as np
 
-    import benchmarks.lava_reproduction as lava
     from rllib_asor.report.stats import bootstrap_ci
 
-    assert summary.bootstrap_ci is bootstrap_ci and lava.bootstrap_ci is bootstrap_ci
+    assert summary.bootstrap_ci is bootstrap_ci
     lo, hi = bootstrap_ci([0.1, 0.5, 0.7, 0.2, 0.9])
     assert lo < float(np.mean([0.1, 0.5, 0.7, 0.2, 0.9])) < hi
     assert (lo, hi) == bootstrap_ci([0.1, 0.5, 0.7, 0.2, 0.9])  # seeded: reproducible

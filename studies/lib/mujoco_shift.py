@@ -6,10 +6,10 @@ examples' setting, tuned_examples/mujoco/), for the same number of env steps; it
 policy is then evaluated under the three fixed dynamics of the paper's MuJoCo table: `original`,
 `body_mass` (mass ×3) and `density_10`.
 
-    python -m benchmarks.mujoco_shift --task Hopper --seeds 3 --steps 6000 \
-        --out benchmarks/out/mujoco_shift
-    python -m benchmarks.mujoco_shift --algo ppo --task Hopper --seeds 5 --steps 300000 \
-        --methods ppo asor:mode=asor --out benchmarks/out/mujoco_shift_ppo
+    python -m studies.lib.mujoco_shift --task Hopper --seeds 3 --steps 6000 \
+        --out studies/out/mujoco_shift
+    python -m studies.lib.mujoco_shift --algo ppo --task Hopper --seeds 5 --steps 300000 \
+        --methods ppo asor:mode=asor --out studies/out/mujoco_shift_ppo
 
 Methods are `name[:key=value,...]`; the plain algorithm's name (`sac` or `ppo`) means no ASOR,
 any other name is ASOR with exactly the AsorConfig fields it names (nothing is merged in, so
@@ -25,8 +25,8 @@ OUT/runs/<task>-ppo-<method>-<seed>.json (PPO) as soon as it ends (a rerun skips
 `--summarize-only` rebuilds OUT/table.md and OUT/summary.json from them, one table per algo.
 A run file holds `eval` (per dynamics), `eval_return_mean` (mean return over the three),
 `curve` ([env steps, training episode return] per iteration) and `asor_last` (the last
-iteration's `result["asor"]`). benchmarks.compare reads (method, seed) only, so give each algo
-its own OUT for it: `python -m benchmarks.compare --runs OUT --metric eval_return_mean
+iteration's `result["asor"]`). studies.lib.compare reads (method, seed) only, so give each algo
+its own OUT for it: `python -m studies.lib.compare --runs OUT --metric eval_return_mean
 --baseline ppo`.
 
 SAC here uses the tuned examples' settings except the replay/learning-start sizes and the
@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import mean_std, run_if_missing, start_local_ray
+from studies.lib.common import mean_std, run_if_missing, start_local_ray
 
 DEFAULT_METHODS = {
     "sac": ("sac", "srpo:mode=srpo", "asor:mode=asor"),
@@ -64,7 +64,7 @@ def parse_method(
     """`name[:k=v,...]` → (name, {k: v} as AsorConfig fields; None for the plain algorithm).
 
     Values are JSON where they parse (`0.05`, `true`, `[64, 64]`), else strings. `base` (none
-    here; benchmarks.offline_cql passes its own) is updated with k=v."""
+    here; studies.lib.offline_cql passes its own) is updated with k=v."""
     name, _, rest = text.partition(":")
     if name == plain and not rest:
         return name, None
@@ -171,7 +171,7 @@ def evaluate(
 
 def train(task: str, seed: int, asor: dict[str, Any] | None, args: argparse.Namespace):
     """Train to `args.steps` env steps; return (algo, curve, last asor stats, wall seconds)."""
-    algo_name = getattr(args, "algo", "sac")  # benchmarks.walker_figure's args have no algo
+    algo_name = getattr(args, "algo", "sac")  # studies.lib.walker_figure's args have no algo
     algo = CONFIGS[algo_name](task, seed, asor, args).build_algo()
     curve, steps, t0, result = [], 0, time.time(), {}
     while steps < args.steps:
@@ -290,7 +290,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--iter-steps", type=int, default=500, help="env steps per reported iteration")
     p.add_argument("--minibatch", type=int, default=64, help="PPO minibatch size")
     p.add_argument("--eval-episodes", type=int, default=2)
-    p.add_argument("--out", default="benchmarks/out/mujoco_shift")
+    p.add_argument("--out", default="studies/out/mujoco_shift")
     p.add_argument("--summarize-only", action="store_true")
     args = p.parse_args(argv)
     methods = [parse_method(t, plain=args.algo) for t in args.methods or DEFAULT_METHODS[args.algo]]

@@ -7,11 +7,11 @@ each dynamics with D4RL's normalised score against the dataset's own random and 
 returns (`rllib_asor.data.scoring.evaluate`).
 
     make datasets                          # or: rllib data collect ...
-    python -m benchmarks.offline_cql --data data/offline/hopper --quality medium --seeds 3 \\
-        --iters 20 --iter-updates 100 --out benchmarks/out/offline_cql
+    python -m studies.lib.offline_cql --data data/offline/hopper --quality medium --seeds 3 \\
+        --iters 20 --iter-updates 100 --out studies/out/offline_cql
 
 Methods are `name[:key=value,...]` over AsorConfig fields (`cql` = no ASOR), as in
-`benchmarks.mujoco_shift`. Runs are written to OUT/runs/<quality>-<method>-<seed>.json as they
+`studies.lib.mujoco_shift`. Runs are written to OUT/runs/<quality>-<method>-<seed>.json as they
 end (a rerun skips them); `--summarize-only` rebuilds OUT/table.md and OUT/summary.json.
 """
 
@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import mean_std, run_if_missing, start_local_ray
-from benchmarks.mujoco_shift import parse_method
+from studies.lib.common import mean_std, run_if_missing, start_local_ray
+from studies.lib.mujoco_shift import parse_method
 
 DEFAULT_METHODS = ("cql", "srpo:mode=srpo", "asor:mode=asor")
 ASOR_BASE = {"preset": "paper", "lambda_": 0.1, "rho_value": 0.5, "rho_count": 0.5, "proxy": "rnd", "reward_form": "log"}
@@ -157,7 +157,7 @@ def main(argv: list[str] | None = None) -> None:
         "each costs a twin-critic pass over the batch: the update's main cost on a CPU)",
     )
     p.add_argument("--eval-episodes", type=int, default=3, help="episodes per dynamics")
-    p.add_argument("--out", default="benchmarks/out/offline_cql")
+    p.add_argument("--out", default="studies/out/offline_cql")
     p.add_argument("--summarize-only", action="store_true")
     args = p.parse_args(argv)
     out = Path(args.out)

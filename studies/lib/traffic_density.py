@@ -5,7 +5,7 @@ examples' laptop setting, tuned_examples/highway/). Every run trains for the sam
 env steps; its greedy policy is then evaluated at fixed densities (return, crash rate, mean
 speed). highway-env costs 35-175 ms per decision on one core, so the budget is tiny.
 
-    python -m benchmarks.traffic_density --seeds 1 --steps 1500 --out benchmarks/out/traffic_density
+    python -m studies.lib.traffic_density --seeds 1 --steps 1500 --out studies/out/traffic_density
 
 Runs are written to OUT/runs/<method>-<seed>.json as they end (a rerun skips them);
 `--summarize-only` rebuilds OUT/table.md and OUT/summary.json.
@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.common import run_if_missing, start_local_ray
+from studies.lib.common import run_if_missing, start_local_ray
 
 METHODS = {
     "ppo": None,
@@ -180,7 +180,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--batch", type=int, default=500, help="PPO train_batch_size")
     p.add_argument("--eval-densities", type=float, nargs="+", default=[0.5, 1.0, 2.0])
     p.add_argument("--eval-episodes", type=int, default=3)
-    p.add_argument("--out", default="benchmarks/out/traffic_density")
+    p.add_argument("--out", default="studies/out/traffic_density")
     p.add_argument("--summarize-only", action="store_true")
     args = p.parse_args(argv)
     out = Path(args.out)
