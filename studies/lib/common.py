@@ -1,0 +1,138 @@
+"""What every study runner shares: resumable run files, partial saves of unfinished runs, the
+(method, seed) grid on Ray Tune, and table cells. Ray start-up and atomic JSON writes are the
+speed benchmarks' (`benchmarks.common`), re-exported here so a study imports one module."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from benchmarks.common import start_local_ray, write_json
+
+__all__ = [
+    "load_partial",
+    "mean_std",
+    "run_if_missing",
+    "run_method_seed_grid",
+    "runs_made_otherwise",
+    "save_partial",
+    "start_local_ray",
+    "write_json",
+]
+
+
+def save_partial(partial: Path, state: dict[str, Any], save: Callable[[Path], None]) -> None:
+    """Save an unfinished run: `save(folder)` writes the checkpoint into an empty folder, the
+    one the current state does not name (`algo-a` / `algo-b` in turn); then the state naming
+    it replaces the old one atomically; then the previous checkpoint goes. A run killed at any
+    moment keeps a state and the complete checkpoint it names (`load_partial`)."""
+    partial.mkdir(parents=True, exist_ok=True)
+    current = load_partial(partial)
+    old = current[1] if current else None
+    name = "algo-b" if old == partial / "algo-a" else "algo-a"
+    shutil.rmtree(partial / name, ignore_errors=True)
+    (partial / name).mkdir()
+    save(partial / name)
+    write_json(partial / "state.json", {**state, "checkpoint": name})
+    if old is not None and old != partial:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def load_partial(partial: Path) -> tuple[dict[str, Any], Path] | None:
+    """The last `save_partial` of a run: (its state, its checkpoint folder), or None if the run
+    was never saved. A state without a `checkpoint` (saved before the folders alternated)
+    names `partial` itself."""
+    state_file = partial / "state.json"
+    if not state_file.exists():
+        return None
+    state = json.loads(state_file.read_text())
+    return state, partial / state.get("checkpoint", "")
+
+
+def run_if_missing(path: Path, label: str, run: Callable[[], dict[str, Any]]) -> None:
+    """One sequential benchmark run: skipped when its run file exists (a rerun resumes where
+    it stopped), else `run()`, its result written atomically to `path`, progress printed."""
+    if path.exists():
+        return
+    print(f"run {label}", flush=True)
+    res = run()
+    write_json(path, res)
+    print(f"  eval {res['eval']} wall {res['wall_s']:.0f}s", flush=True)
+
+
+def mean_std(xs: Sequence[float]) -> str:
+    """Table cell "mean ± std" (sample std over runs; 0 for a single run), one decimal."""
+    sd = float(np.std(xs, ddof=1)) if len(xs) > 1 else 0.0
+    return f"{np.mean(xs):.1f} ± {sd:.1f}"
+
+
+def runs_made_otherwise(
+    out: Path,
+    names: Iterable[str],
+    seeds: Iterable[int],
+    settings: dict[str, Any],
+    defaults: dict[str, Any] | None = None,
+) -> list[str]:
+    """Run files OUT/runs/<method>-<seed>.json that exist and record other `settings` than
+    these. A rerun keeps finished runs, so without this check one folder could silently mix
+    settings. A key a file lacks counts as `defaults[key]`, or is not compared."""
+    import json
+
+    defaults = defaults or {}
+    clash = []
+    for name in names:
+        for seed in seeds:
+            path = out / "runs" / f"{name}-{seed}.json"
+            if not path.exists():
+                continue
+            run = json.loads(path.read_text())
+            for key, want in settings.items():
+                if key not in run and key not in defaults:
+                    continue
+                if (have := run.get(key, defaults.get(key))) != want:
+                    clash.append(f"{path.name} ({key}={have!r})")
+                    break
+    return clash
+
+
+def run_method_seed_grid(
+    trainable: Callable[[dict[str, Any]], Any],
+    methods: Iterable[tuple[str, dict[str, Any] | None]],
+    seeds: Iterable[int],
+    shared: dict[str, Any],
+    out: Path,
+    cpus_per_trial: int = 1,
+) -> None:
+    """One Tune trial per (method, seed) whose `out/runs/<method>-<seed>.json` is missing, so
+    an interrupted benchmark resumes where it stopped. A trial holds `cpus_per_trial` CPUs: one
+    for itself, the rest for the env runners it starts.
+
+    Each trial gets `{"spec": {"method", "asor", "seed", "args": shared, "out"}}`.
+    """
+    import time
+
+    from ray import tune
+
+    methods = list(methods)
+    specs = [
+        {"method": n, "asor": a, "seed": s, "args": shared, "out": str(out)}
+        for s in seeds
+        for n, a in methods
+        if not (out / "runs" / f"{n}-{s}.json").exists()
+    ]
+    t0 = time.time()
+    if specs:
+        tune.Tuner(
+            tune.with_resources(
+                trainable,
+                tune.PlacementGroupFactory([{"CPU": 1}] * cpus_per_trial),
+            ),
+            param_space={"spec": tune.grid_search(specs)},
+            run_config=tune.RunConfig(storage_path=str(out / "tune"), verbose=0),
+        ).fit()
+    print(f"trained {len(specs)} runs in {time.time() - t0:.0f} s")
