@@ -90,11 +90,14 @@ class StateArchive(nn.Module):
         b = int(dynamics_id) % self.buckets
         n = int(self.size[b])
         self.episodes_added += 1
+        new = (len(features),)
         feats = torch.cat([self.features[b, :n], features.to(self.features)])
-        rets = torch.cat([self.returns[b, :n], torch.full((len(features),), float(episode_return))])
+        rets = torch.cat(
+            [self.returns[b, :n], torch.full(new, float(episode_return), device=self.returns.device)]
+        )
         rtg = torch.cat([self.return_to_go[b, :n], return_to_go.to(self.return_to_go)])
         stamp = torch.cat(
-            [self.stamp[b, :n], torch.full((len(features),), float(self.episodes_added))]
+            [self.stamp[b, :n], torch.full(new, float(self.episodes_added), device=self.stamp.device)]
         )
         # Highest episode return first; among equal returns the newest first.
         order = torch.argsort(stamp, descending=True, stable=True)
@@ -118,16 +121,20 @@ class StateArchive(nn.Module):
         self, n: int, generator: torch.Generator | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Up to n (features, return-to-go) drawn evenly over the non-empty buckets,
-        without replacement inside a bucket."""
-        filled = [b for b in range(self.buckets) if self.size[b] > 0]
+        without replacement inside a bucket, on the archive's device. The permutations are
+        drawn on `generator`'s device (the same draws wherever the archive lives)."""
+        device = self.features.device
+        filled = [b for b, size in enumerate(self.size.tolist()) if size > 0]
         if not filled or n <= 0:
             dim = self.features.shape[-1]
-            return torch.zeros(0, dim), torch.zeros(0)
+            return torch.zeros(0, dim, device=device), torch.zeros(0, device=device)
         per = -(-n // len(filled))
+        draw_on = generator.device if generator is not None else device
         feats, rtg = [], []
         for b in filled:
             size = int(self.size[b])
-            idx = torch.randperm(size, generator=generator)[: min(per, size)]
+            perm = torch.randperm(size, generator=generator, device=draw_on)
+            idx = perm[: min(per, size)].to(device)
             feats.append(self.features[b, idx])
             rtg.append(self.return_to_go[b, idx])
         return torch.cat(feats), torch.cat(rtg)

@@ -81,7 +81,9 @@ def discriminator_loss(
             "disc_acc_fake": _masked_mean((logits < 0).float(), fake),
             "disc_bce_real": bce_real,
             "disc_bce_fake": bce_fake,
-            "disc_entropy": entropy.mean() if entropy.numel() else torch.zeros(()),
+            "disc_entropy": (
+                entropy.mean() if entropy.numel() else torch.zeros((), device=logits.device)
+            ),
             "js_estimate": LOG2 - 0.5 * (bce_real + bce_fake),
         }
     return loss, stats
@@ -89,4 +91,5 @@ def discriminator_loss(
 
 def _masked_mean(x: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     n = mask.sum()
-    return torch.where(n > 0, (x * mask).sum() / n.clamp_min(1), torch.zeros((), dtype=x.dtype))
+    zero = torch.zeros((), dtype=x.dtype, device=x.device)
+    return torch.where(n > 0, (x * mask).sum() / n.clamp_min(1), zero)

@@ -104,7 +104,8 @@ def _random_generator(
         return rng
     if _torch_type(rng, "Generator"):
         torch = sys.modules["torch"]
-        return np.random.default_rng(int(torch.randint(0, 2**31 - 1, (1,), generator=rng)))
+        seed = torch.randint(0, 2**31 - 1, (1,), generator=rng, device=rng.device)
+        return np.random.default_rng(int(seed))
     return np.random.default_rng(rng)
 
 

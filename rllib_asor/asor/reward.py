@@ -89,7 +89,10 @@ def potential_shaping(
 
 def explained_variance(values: torch.Tensor, targets: torch.Tensor) -> float:
     """1 − Var(targets − values) / Var(targets); −1 when the targets are constant."""
-    var = targets.var(unbiased=False) if targets.numel() > 1 else torch.zeros(())
+    if targets.numel() > 1:
+        var = targets.var(unbiased=False)
+    else:
+        var = torch.zeros((), dtype=targets.dtype, device=targets.device)
     if var <= 1e-12:
         return -1.0
     return float(1.0 - (targets - values).var(unbiased=False) / var)

@@ -189,13 +189,17 @@ def asor_update(
         real = (
             partition(cand_rtg, cand_counts, rho_value, rho_count, mode=mode, rng=rng)
             if len(cand)
-            else torch.zeros(0, dtype=torch.bool)
+            else torch.zeros(0, dtype=torch.bool, device=cand.device)
         )
         # Shuffled: the Learner cuts this batch into minibatches in row order.
-        order = torch.from_numpy(rng.permutation(int(real.sum()) + n))
+        k, device = int(real.sum()), feats.device
+        order = torch.from_numpy(rng.permutation(k + n)).to(device)
         disc_feats = torch.cat([cand[real].to(feats), feats])[order]
-        labels = torch.cat([torch.ones(int(real.sum())), torch.zeros(n)]).to(feats)[order]
-        batch_real = torch.zeros(n, dtype=torch.bool)
+        labels = torch.cat(
+            [torch.ones(k, dtype=feats.dtype, device=device),
+             torch.zeros(n, dtype=feats.dtype, device=device)]
+        )[order]
+        batch_real = torch.zeros(n, dtype=torch.bool, device=device)
     else:
         # The paper (and off-policy/offline, whose replay batch already spans every
         # dynamics seen): D_P is the top of the current batch.
@@ -304,7 +308,8 @@ def _critic_ev(batch: AsorBatch) -> float | None:
             nxt = nv[t] if t == chunk.stop - 1 else g
             g = r[t] + batch.gamma * (0.0 if term[t] else nxt)
             targets[t] = g
-    return explained_variance(batch.values.double(), torch.tensor(targets, dtype=torch.float64))
+    values = batch.values.double()
+    return explained_variance(values, torch.tensor(targets, dtype=torch.float64, device=values.device))
 
 
 def _archive_episodes(archive: StateArchive, batch: AsorBatch) -> None:

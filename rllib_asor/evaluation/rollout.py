@@ -21,12 +21,13 @@ def deterministic_action(module: Any, obs: np.ndarray) -> np.ndarray:
     import torch
     from ray.rllib.core import Columns
 
+    from rllib_asor.devices import module_device
+
+    x = torch.as_tensor(obs, dtype=torch.float32, device=module_device(module))[None]
     with torch.no_grad():
-        out = module.forward_inference(
-            {Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None]}
-        )
+        out = module.forward_inference({Columns.OBS: x})
         dist = module.get_inference_action_dist_cls().from_logits(out[Columns.ACTION_DIST_INPUTS])
-        return deterministic_sample(dist)[0].numpy()
+        return deterministic_sample(dist)[0].cpu().numpy()
 
 
 def deterministic_sample(dist: Any) -> Any:

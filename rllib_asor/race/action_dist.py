@@ -24,14 +24,17 @@ from ray.rllib.core.distribution.torch.torch_distribution import (
 
 
 @lru_cache(maxsize=32)
-def _padding_index(input_lens: tuple[int, ...]) -> tuple[torch.Tensor, torch.Tensor]:
-    """[heads, max_k] positions into the logits (padding → one past the end) and the valid mask."""
+def _padding_index(
+    input_lens: tuple[int, ...], device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """[heads, max_k] positions into the logits (padding → one past the end) and the valid mask,
+    on `device` (cached per device: no host-to-device copy per call)."""
     max_k, start, rows, valid = max(input_lens), 0, [], []
     for n in input_lens:
         rows.append([start + k if k < n else sum(input_lens) for k in range(max_k)])
         valid.append([k < n for k in range(max_k)])
         start += n
-    return torch.tensor(rows), torch.tensor(valid)
+    return torch.tensor(rows, device=device), torch.tensor(valid, device=device)
 
 
 class PaddedMultiCategorical(TorchMultiCategorical):
@@ -45,8 +48,7 @@ class PaddedMultiCategorical(TorchMultiCategorical):
         super(TorchMultiCategorical, self).__init__()  # RLlib's Distribution base, no heads
         self._logits = logits
         self._input_lens = tuple(int(n) for n in input_lens)
-        index, self._valid = _padding_index(self._input_lens)
-        index, self._valid = index.to(logits.device), self._valid.to(logits.device)
+        index, self._valid = _padding_index(self._input_lens, logits.device)
         pad = logits.new_full((*logits.shape[:-1], 1), float("-inf"))
         padded = torch.cat([logits, pad], dim=-1)[..., index]  # [..., heads, max_k]
         self._padded_logits = padded

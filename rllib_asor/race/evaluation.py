@@ -77,6 +77,8 @@ def module_policy(module: Any, explore: bool) -> Policy:
     import torch
     from ray.rllib.core import Columns
 
+    from rllib_asor.devices import module_device
+
     dist_cls = (
         module.get_exploration_action_dist_cls()
         if explore
@@ -84,13 +86,14 @@ def module_policy(module: Any, explore: bool) -> Policy:
     )
 
     def act(batch: dict[str, np.ndarray], envs: list[Any]) -> np.ndarray:
+        device = module_device(module)
         with torch.no_grad():
-            obs = {k: torch.as_tensor(v) for k, v in batch.items()}
+            obs = {k: torch.as_tensor(v, device=device) for k, v in batch.items()}
             logits = module.forward_inference({Columns.OBS: obs})[Columns.ACTION_DIST_INPUTS]
             dist = dist_cls.from_logits(logits)
             if not explore:
                 dist = dist.to_deterministic()
-            return dist.sample().numpy()
+            return dist.sample().cpu().numpy()
 
     return act
 

@@ -41,6 +41,7 @@ from ray.rllib.core.rl_module.rl_module import RLModule
 from ray.rllib.core.rl_module.torch import TorchRLModule
 from torch import nn
 
+from rllib_asor.devices import module_device
 from rllib_asor.race.action_dist import PaddedMultiCategorical
 
 MAP_KEYS: tuple[str, ...] = ("terrain", "items", "targets", "goals")
@@ -124,7 +125,8 @@ class MapEncoder(nn.Module):
             c_in = c
         self.conv = nn.Sequential(*layers, nn.Flatten())
         with torch.no_grad():
-            n_flat = self.conv(torch.zeros(1, *shape)).shape[-1]
+            probe = torch.zeros(1, *shape, device=module_device(self.conv))
+            n_flat = self.conv(probe).shape[-1]
         self.fc = nn.Sequential(nn.Linear(n_flat, out_dim), nn.ReLU())
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:

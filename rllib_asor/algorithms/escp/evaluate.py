@@ -20,6 +20,7 @@ from ray.rllib.core.columns import Columns
 
 from rllib_asor.algorithms.escp.module import EscpTorchRLModule
 from rllib_asor.algorithms.escp.replay import WINDOW
+from rllib_asor.devices import module_device
 
 
 @dataclass
@@ -53,6 +54,7 @@ def rollout(
     low, high = env.action_space.low, env.action_space.high
     out = Rollouts()
     h = module.escp.history_len if escp else 0
+    device = module_device(module)
     try:
         for i in range(episodes):
             obs, info = env.reset(seed=seed + i)
@@ -60,16 +62,17 @@ def rollout(
             last_action = np.zeros(low.shape[0], np.float32)
             done, total, n, zs, ids = False, 0.0, 0, [], []
             while not done:
-                batch = {Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None]}
+                x = torch.as_tensor(obs, dtype=torch.float32, device=device)[None]
+                batch = {Columns.OBS: x}
                 if escp:
                     win = np.roll(win, -1, axis=0)
                     win[-1] = np.concatenate([obs, last_action])
-                    batch[WINDOW] = torch.as_tensor(win)[None]
+                    batch[WINDOW] = torch.as_tensor(win, device=device)[None]
                     if record_context:
-                        zs.append(module.context(batch[WINDOW])[0].numpy())
+                        zs.append(module.context(batch[WINDOW])[0].cpu().numpy())
                         ids.append(int(info.get("dynamics_id", -1)))
                 logits = module.forward_inference(batch)[Columns.ACTION_DIST_INPUTS]
-                action = torch.tanh(logits.chunk(2, dim=-1)[0])[0].numpy()
+                action = torch.tanh(logits.chunk(2, dim=-1)[0])[0].cpu().numpy()
                 obs, r, term, trunc, info = env.step(low + (action + 1.0) * (high - low) / 2.0)
                 last_action = action.astype(np.float32)
                 total, n, done = total + float(r), n + 1, term or trunc

@@ -39,6 +39,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from rllib_asor.devices import module_device
+
 
 def soft_clamp(x: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor) -> torch.Tensor:
     """Clamp keeping the gradient (`offlinerl/utils/function.py soft_clamp`)."""
@@ -84,7 +86,7 @@ class GaussianEnsemble(nn.Module):
         )
         self.out = EnsembleLinear(hidden, 2 * (obs_dim + 1), members)
         self.max_logstd = nn.Parameter(torch.ones(obs_dim + 1))
-        self.min_logstd = nn.Parameter(-5 * torch.ones(obs_dim + 1))
+        self.min_logstd = nn.Parameter(torch.full((obs_dim + 1,), -5.0))
         self.register_buffer("obs_mean", torch.zeros(obs_dim))
         self.register_buffer("obs_std", torch.ones(obs_dim))
         self.register_buffer("elite_idx", torch.arange(elites))
@@ -204,24 +206,22 @@ def train_ensemble(
     AdamW(lr 1e-3, weight decay 7.5e-5) as `maple_st.py`'s `algo_init`. `max_epochs` caps the
     loop (None: until `patience` epochs without improvement, as the port)."""
     t0 = time.perf_counter()
-    gen = torch.Generator().manual_seed(seed)
+    gen = torch.Generator().manual_seed(seed)  # on the CPU: the same split on every device
     rng = np.random.default_rng(seed)
-    x_obs = torch.as_tensor(obs, dtype=torch.float32)
-    x_act = torch.as_tensor(actions, dtype=torch.float32)
-    target = torch.cat(
-        [
-            torch.as_tensor(next_obs, dtype=torch.float32),
-            torch.as_tensor(rewards, dtype=torch.float32).reshape(-1, 1),
-        ],
-        dim=-1,
-    )
+    device = module_device(model)
+
+    def on_device(x: np.ndarray, dtype: torch.dtype | None = torch.float32) -> torch.Tensor:
+        return torch.as_tensor(x, dtype=dtype, device=device)
+
+    x_obs, x_act = on_device(obs), on_device(actions)
+    target = torch.cat([on_device(next_obs), on_device(rewards).reshape(-1, 1)], dim=-1)
     n = x_obs.shape[0]
     val_size = min(int(n * 0.2) + 1, holdout_max)
     if n - val_size < 1:
         raise ValueError(f"train_ensemble: {n} rows are too few (need at least 2)")
-    perm = torch.randperm(n, generator=gen)
+    perm = torch.randperm(n, generator=gen, device=gen.device).to(device)
     tr, va = perm[val_size:], perm[:val_size]
-    model.set_normalizer(torch.cat([x_obs, torch.as_tensor(next_obs, dtype=torch.float32)]))
+    model.set_normalizer(torch.cat([x_obs, on_device(next_obs)]))
     opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=weight_decay)
     best = [math.inf] * model.members
     saved = {k: v.detach().clone() for k, v in model.state_dict().items()}
@@ -229,7 +229,7 @@ def train_ensemble(
     k = model.members
     while max_epochs is None or epoch < max_epochs:
         epoch += 1
-        idx = tr[torch.as_tensor(rng.integers(0, len(tr), size=(k, len(tr))))]
+        idx = tr[on_device(rng.integers(0, len(tr), size=(k, len(tr))), None)]
         for start in range(0, idx.shape[1], batch_size):
             b = idx[:, start : start + batch_size]
             mu, logstd = model(x_obs[b], x_act[b])
@@ -254,7 +254,7 @@ def train_ensemble(
     # Restore each member's best weights (`set_select` copies the saved weights back).
     _load_members(model, saved, list(range(k)))
     elites = choose_elites(best, model.num_elites)
-    model.elite_idx.copy_(torch.as_tensor(elites))
+    model.elite_idx.copy_(torch.as_tensor(elites, device=model.elite_idx.device))
     return EnsembleReport(
         epochs=epoch,
         val_losses=[float(v) for v in best],

@@ -15,6 +15,7 @@ import torch
 
 from rllib_asor.algorithms.maple.networks import MapleNetworks
 from rllib_asor.data.scoring import normalized_score
+from rllib_asor.devices import module_device
 
 
 def episode_returns(
@@ -27,17 +28,17 @@ def episode_returns(
 
     env = gym.make(env_id, dynamics=dynamics)
     low, high = env.action_space.low, env.action_space.high
-    returns = []
+    returns, device = [], module_device(nets)
     try:
         for i in range(episodes):
             obs, _ = env.reset(seed=seed + i)
-            hidden = torch.zeros(1, nets.gru_hidden)
-            last = torch.zeros(1, nets.action_dim)
+            hidden = torch.zeros(1, nets.gru_hidden, device=device)
+            last = torch.zeros(1, nets.action_dim, device=device)
             done, total = False, 0.0
             while not done:
-                o = torch.as_tensor(obs, dtype=torch.float32)[None]
+                o = torch.as_tensor(obs, dtype=torch.float32, device=device)[None]
                 act, hidden = nets.policy_step(o, last, hidden, deterministic=True)
-                a = np.clip(low + (act[0].numpy() + 1.0) * (high - low) / 2.0, low, high)
+                a = np.clip(low + (act[0].cpu().numpy() + 1.0) * (high - low) / 2.0, low, high)
                 obs, r, term, trunc, _ = env.step(a)
                 total, done, last = total + float(r), term or trunc, act
             returns.append(total)

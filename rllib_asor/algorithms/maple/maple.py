@@ -200,9 +200,10 @@ class MAPLE(Algorithm):
 
         def set_stats(learner: Any) -> None:
             m = learner.module[DEFAULT_MODULE_ID].unwrapped()
-            m.obs_lo.copy_(torch.as_tensor(lim.obs_lo))
-            m.obs_hi.copy_(torch.as_tensor(lim.obs_hi))
-            m.reward_range.copy_(torch.tensor([lim.rew_lo, lim.rew_hi]))
+            m.obs_lo.copy_(torch.as_tensor(lim.obs_lo, device=m.obs_lo.device))
+            m.obs_hi.copy_(torch.as_tensor(lim.obs_hi, device=m.obs_hi.device))
+            rew = [lim.rew_lo, lim.rew_hi]
+            m.reward_range.copy_(torch.tensor(rew, device=m.reward_range.device))
 
         self.learner_group.foreach_learner(set_stats)
         dims = (s.gru_hidden if s.context else 0,) * 2

@@ -22,6 +22,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from rllib_asor.devices import module_device
+
 LOG_STD_MIN, LOG_STD_MAX = -20.0, 2.0
 
 
@@ -219,5 +221,6 @@ class MapleNetworks(nn.Module):
         gru = self.policy_gru if which == "policy" else self.value_gru
         if gru is None:
             return np.zeros((*obs.shape[:2], 0), dtype=np.float32)
-        o, a = torch.as_tensor(obs), torch.as_tensor(last_actions)
-        return gru(o, a, torch.zeros(o.shape[0], gru.hidden)).numpy()
+        device = module_device(gru)
+        o, a = torch.as_tensor(obs, device=device), torch.as_tensor(last_actions, device=device)
+        return gru(o, a, torch.zeros(o.shape[0], gru.hidden, device=device)).cpu().numpy()

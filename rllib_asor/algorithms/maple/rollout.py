@@ -27,6 +27,7 @@ import torch
 
 from rllib_asor.algorithms.maple.ensemble import GaussianEnsemble
 from rllib_asor.algorithms.maple.termination import TerminationFn
+from rllib_asor.devices import module_device
 
 PolicyStep = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor]]
 """(s_t, a_{t−1}, hidden before t) → (a_t sampled, hidden after t)."""
@@ -146,12 +147,17 @@ def _rollout_chunk(
     penalty_clip: float,
     rng: np.random.Generator,
 ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    n = len(starts["obs"])
-    obs = torch.as_tensor(starts["obs"], dtype=torch.float32).clone()  # stepped in place
-    last = torch.as_tensor(starts["last_actions"], dtype=torch.float32).clone()
-    hidden = torch.as_tensor(starts["policy_hidden"], dtype=torch.float32).clone()
-    lo, hi = torch.as_tensor(limits.obs_lo), torch.as_tensor(limits.obs_hi)
-    member = torch.as_tensor(rng.integers(0, len(ensemble.elite_idx), size=n))
+    n, device = len(starts["obs"]), module_device(ensemble)
+
+    def on_device(x: np.ndarray, dtype: torch.dtype | None = None) -> torch.Tensor:
+        return torch.as_tensor(x, dtype=dtype, device=device)
+
+    f32 = torch.float32
+    obs = on_device(starts["obs"], f32).clone()  # stepped in place
+    last = on_device(starts["last_actions"], f32).clone()
+    hidden = on_device(starts["policy_hidden"], f32).clone()
+    lo, hi = on_device(limits.obs_lo, f32), on_device(limits.obs_hi, f32)
+    member = on_device(rng.integers(0, len(ensemble.elite_idx), size=n))
     alive = np.ones(n, dtype=bool)
     act_dim = last.shape[1]
     keys = ("obs", "actions", "next_obs", "last_actions", "rewards", "terminateds", "valid")
@@ -162,7 +168,7 @@ def _rollout_chunk(
         # rest as invalid; what invalid steps hold is never read): rows after a termination
         # stay zero.
         idx = np.flatnonzero(alive)
-        t_idx = torch.as_tensor(idx)
+        t_idx = on_device(idx)
         step = {
             "obs": np.zeros((n, obs.shape[1]), np.float32),
             "actions": np.zeros((n, act_dim), np.float32),
@@ -176,15 +182,15 @@ def _rollout_chunk(
             o, a_prev = obs[t_idx], last[t_idx]
             act, h_new = policy_step(o, a_prev, hidden[t_idx])
             mu, logstd = ensemble.elites(o, act)
-            noise = torch.as_tensor(rng.standard_normal(mu.shape[1:]), dtype=torch.float32)
-            rows, m = torch.arange(len(idx)), member[t_idx]
+            noise = on_device(rng.standard_normal(mu.shape[1:]), f32)
+            rows, m = torch.arange(len(idx), device=device), member[t_idx]
             sample = mu[m, rows] + logstd[m, rows].exp() * noise
             next_obs, reward = sample[:, :-1], sample[:, -1]
-            term = terminated_fn(next_obs.numpy())
+            term = terminated_fn(next_obs.cpu().numpy())
             next_obs = torch.maximum(torch.minimum(next_obs, hi), lo)
             reward = reward.clamp(limits.rew_lo, limits.rew_hi)
             reward, u = penalized_reward(reward, logstd, penalty_coef, penalty_clip)
-            us.append(u.numpy())
+            us.append(u.cpu().numpy())
             for k, v in (
                 ("obs", o),
                 ("actions", act),
@@ -192,7 +198,7 @@ def _rollout_chunk(
                 ("last_actions", a_prev),
                 ("rewards", reward),
             ):
-                step[k][idx] = v.numpy()
+                step[k][idx] = v.cpu().numpy()
             step["terminateds"][idx] = term
             obs[t_idx], last[t_idx], hidden[t_idx] = next_obs, act, h_new
             alive[idx[term]] = False
