@@ -13,7 +13,7 @@ export MUJOCO_GL ?= egl
 # package ("Location ... is ignored"). Not ours to print; every other pip line is kept.
 PIP_FILTER := 2>&1 | { grep -v "^WARNING: Location '.*' is ignored" || true; }
 
-.PHONY: install train smoke test lint bench clean
+.PHONY: install train smoke test lint bench clean docs
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -21,7 +21,7 @@ $(STAMP): pyproject.toml
 	# torch pinned to the CPU build (a local wheel here); never an open `torch` requirement.
 	$(PY) -m pip install -q "torch==2.13.0" $(PIP_FILTER)
 	# compat: a plain .pth to the source tree (the default finder prints a notice per install)
-	$(PY) -m pip install -q -e ".[test]" --config-settings editable_mode=compat $(PIP_FILTER)
+	$(PY) -m pip install -q -e ".[test,docs]" --config-settings editable_mode=compat $(PIP_FILTER)
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -39,6 +39,11 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks studies
+
+# The documentation site with the API reference (mkdocs.yml) in site/: any warning, a broken
+# link or a docstring that does not parse, fails it (tests/test_docs_build.py runs the same).
+docs: $(STAMP)
+	$(VENV)/bin/mkdocs build --strict -d site
 
 # Offline datasets (docs/offline.md): per env and dynamics a PPO (or SAC) run, then random /
 # medium / expert / medium-replay data in data/offline/<task>/. Scale with the variables.

@@ -149,7 +149,8 @@ class MujocoShiftEnv(gym.Env[np.ndarray, np.ndarray]):
         switch_every: redraw the sampled params every K steps within an episode (None: never).
         num_tasks: draw a pool of this many parameter sets once and pick one per episode.
         task_seed: seed of the task pool.
-        log_scale_limit, scale_base: multipliers are scale_base ** U(-limit, limit).
+        log_scale_limit: multipliers are scale_base ** U(-log_scale_limit, log_scale_limit).
+        scale_base: the base of those multipliers.
         wind_limit: wind components are U(-wind_limit, wind_limit) m/s.
         air_density: opt.density used whenever wind is on (nominal models have 0).
         per_element: one multiplier per model element instead of one per parameter.
