@@ -4,9 +4,11 @@
 
 `steps` is `num_env_steps_sampled_lifetime` (over the stop criterion when there is one), ETA
 extrapolates the trial's own rate to that criterion (or to `training_iteration`), `success` is
-the race's `race/success_rate`, `bonus` is ASOR's `asor/potential_share` (|λ·b| ÷ the env
-reward's scale) and `disc` its discriminator accuracy, each shown only when reported (and
-finite: no `return` before the first episode ends) and while the line fits.
+the race's `race/success_rate`, `bonus` is ASOR's `asor/bonus_share` (the amount ASOR adds
+to the reward per step, mean |Δr| ÷ the env reward's running RMS) and `disc` its
+discriminator accuracy, each shown only when reported (and finite: no `return` before the
+first episode ends) and while the line fits. When ASOR looks inert over the last iterations
+(`rllib_asor.report.health`), the line ends with why, e.g. `asor inert: disc at chance`.
 """
 
 from __future__ import annotations
@@ -14,10 +16,13 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections import deque
 from collections.abc import Mapping
 from typing import Any, TextIO
 
 from ray.tune.progress_reporter import ProgressReporter
+
+from rllib_asor.report.health import WINDOW, health_of_rows
 
 WIDTH = 100
 STEPS = "num_env_steps_sampled_lifetime"
@@ -26,7 +31,7 @@ ITERATION = "training_iteration"
 OPTIONAL = (
     ("return", ("env_runners", "episode_return_mean"), "{:.4g}"),
     ("success", ("race", "success_rate"), "{:.2f}"),
-    ("bonus", ("asor", "potential_share"), "{:.3f}"),
+    ("bonus", ("asor", "bonus_share"), "{:.3f}"),
     ("disc", ("asor", "disc_acc"), "{:.2f}"),
     ("stage", ("race", "curriculum_stage"), "{:.0f}"),
 )
@@ -46,8 +51,12 @@ class LineReporter(ProgressReporter):
         self.out = out
         self._last_print = float("-inf")
         self._printed: dict[str, tuple[str, int]] = {}  # trial id -> (status, iteration)
+        # trial id -> (iteration, result["asor"]) of the last iterations seen
+        self._asor: dict[str, deque[tuple[Any, Any]]] = {}
 
     def should_report(self, trials: list[Any], done: bool = False) -> bool:
+        for t in trials:
+            self.observe(t.trial_id, t.last_result or {})
         changed = any(self._new(t) for t in trials)
         return changed and (done or time.monotonic() - self._last_print >= self.every_s)
 
@@ -57,11 +66,25 @@ class LineReporter(ProgressReporter):
             if not self._new(trial):
                 continue
             self._printed[trial.trial_id] = self._key(trial)
-            print(self.line(index, trial.status, trial.last_result or {}), file=out, flush=True)
+            result = trial.last_result or {}
+            self.observe(trial.trial_id, result)
+            print(self.line(index, trial.status, result, trial.trial_id), file=out, flush=True)
         self._last_print = time.monotonic()
 
-    def line(self, index: int, status: str, result: Mapping[str, Any]) -> str:
-        """The progress line of one trial's latest result."""
+    def observe(self, trial_id: str, result: Mapping[str, Any]) -> None:
+        """Keep the ASOR metrics of each new iteration of a trial (for `asor inert: ...`)."""
+        asor, it = result.get("asor"), result.get(ITERATION)
+        if not isinstance(asor, Mapping) or it is None:
+            return
+        seen = self._asor.setdefault(trial_id, deque(maxlen=WINDOW))
+        if not seen or seen[-1][0] != it:
+            seen.append((it, asor))
+
+    def line(
+        self, index: int, status: str, result: Mapping[str, Any], trial_id: str | None = None
+    ) -> str:
+        """The progress line of one trial's latest result (with `trial_id`: and whether its
+        ASOR looks inert over the iterations `observe` kept)."""
         it = result.get(ITERATION)
         if it is None:
             return f"[{index}] {status.lower()}"
@@ -76,6 +99,10 @@ class LineReporter(ProgressReporter):
         if eta is not None and status == "RUNNING":
             parts.append(f"ETA {_duration(eta)}")
         tail = [] if status in ("RUNNING", "PENDING") else [status.lower()]
+        history = self._asor.get(trial_id, ()) if trial_id is not None else ()
+        inert = health_of_rows([{"asor": asor} for _, asor in history])
+        if inert is not None:
+            tail.insert(0, inert.short)
         for label, path, fmt in OPTIONAL:  # in order, as many as fit
             value = _get(result, path)
             shown = isinstance(value, int | float) and math.isfinite(value)

@@ -13,7 +13,7 @@ RESULT = {
     "time_total_s": 250.0,
     "env_runners": {"episode_return_mean": -12.34567},
     "race": {"success_rate": 0.3125, "curriculum_stage": 1},
-    "asor": {"potential_share": 0.04, "disc_acc": 0.81, "lambda": 0.05},
+    "asor": {"bonus_share": 0.04, "potential_share": 0.3, "disc_acc": 0.81, "lambda": 0.05},
 }
 
 
@@ -57,3 +57,26 @@ def test_reporter_prints_each_new_result_once_and_skips_pending():
     reporter.report([pending, running], done=False)
     lines = out.getvalue().splitlines()
     assert [line.split("  ")[0] for line in lines] == ["[1] it 12", "[1] it 13"]
+
+
+def test_bonus_is_the_bonus_share_not_the_potential_share():
+    line = LineReporter().line(0, "RUNNING", RESULT)
+    assert "bonus 0.040" in line and "0.300" not in line
+
+
+def test_line_says_when_asor_is_inert_and_stops_saying_it_once_it_works():
+    out = io.StringIO()
+    reporter = LineReporter(every_s=0.0, out=out)
+    at_chance = {"js_estimate": 0.002, "disc_acc": 0.5, "active": 1.0, "bonus_share": 0.01}
+    trial = SimpleNamespace(trial_id="t", status="RUNNING", last_result={})
+    for it in range(1, 11):
+        trial.last_result = dict(RESULT, training_iteration=it, asor=at_chance)
+        assert reporter.should_report([trial])
+        reporter.report([trial], done=False)
+    lines = out.getvalue().splitlines()
+    assert all("inert" not in line for line in lines[:9])  # fewer than 10 iterations: no verdict
+    assert lines[9].endswith("asor inert: disc at chance") and len(lines[9]) <= 100
+    trial.last_result = dict(RESULT, training_iteration=11, asor=dict(at_chance, js_estimate=0.2))
+    reporter.should_report([trial])
+    reporter.report([trial], done=False)
+    assert "inert" not in out.getvalue().splitlines()[-1]
