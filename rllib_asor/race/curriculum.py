@@ -16,7 +16,8 @@ training metric over the stage's maps, each map's value taken over its latest
 lifetime totals ``race/map_<m>/episodes|success_sum|goal_reward_sum``); when that mean reaches
 ``threshold``, the next stage's maps are pushed to every env (``set_map_choice``, effective at each env's next reset).
 ``max_env_steps`` (optional) moves on after that many env steps in a stage regardless.
-The stage and its score are logged as ``race/curriculum_stage`` and ``race/curriculum_score``.
+The stage and its score are logged as ``race/curriculum_stage`` and ``race/curriculum_score``
+(the score only once every map of the stage has enough episodes).
 
 The stage lives on the driver; env runners that are recreated after a failure get it again
 (`on_env_runners_recreated`). A run restored from a checkpoint starts at stage 0 again and
@@ -186,4 +187,5 @@ class MapCurriculumCallback(RLlibCallback):
             self._push(algorithm)
         result.setdefault("race", {})
         result["race"]["curriculum_stage"] = self.stage
-        result["race"]["curriculum_score"] = score
+        if ready:  # before every map has enough episodes: absent, never NaN
+            result["race"]["curriculum_score"] = score

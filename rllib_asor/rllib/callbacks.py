@@ -1,11 +1,14 @@
 """Lift ASOR's Learner statistics into the results as `asor/<name>`.
 
 The Learner logs them under its module ids (`learners/asor_disc.<policy>/...`); users read
-`asor/disc_loss`, `asor/aug_reward_mean`, ... (single policy) or `asor/<policy>/...`.
+`asor/disc_loss`, `asor/aug_reward_mean`, ... (single policy) or `asor/<policy>/...`. A metric
+that does not apply (`critic_ev` without episode chunks: SAC, ESCP, CQL) is absent; a value
+that is not a finite number is never lifted.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from ray.rllib.callbacks.callbacks import RLlibCallback
@@ -22,6 +25,7 @@ ASOR_METRICS = frozenset(
         "aug_reward_max", "aug_reward_abs_mean", "bonus_share", "bonus_mean", "env_reward_mean",
         "value_mean", "value_real_mean", "omega_batch_mean", "omega_real_mean",
         "omega_generated_mean", "archive_states", "critic_ev", "active", "potential", "potential_share",
+        "share_capped",
         # proxies
         "rnd_loss", "ensemble_loss",
     }
@@ -36,14 +40,23 @@ def lift_asor_metrics(result: dict[str, Any]) -> dict[str, Any]:
             if module_id.startswith(prefix) and isinstance(stats, dict):
                 pid = module_id[len(prefix) :]
                 per_policy.setdefault(pid, {}).update(
-                    {k: float(v) for k, v in stats.items() if k in ASOR_METRICS}
-                )
+                    {k: x for k, v in stats.items() if k in ASOR_METRICS
+                     if (x := _finite(v)) is not None}
+                )  # fmt: skip
     for stats in per_policy.values():
         if "disc_acc_real" in stats and "disc_acc_fake" in stats:
             stats["disc_acc"] = 0.5 * (stats["disc_acc_real"] + stats["disc_acc_fake"])
     if len(per_policy) == 1:
         return next(iter(per_policy.values()))
     return per_policy
+
+
+def _finite(value: Any) -> float | None:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
 
 
 class AsorMetricsCallback(RLlibCallback):

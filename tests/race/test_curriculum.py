@@ -69,6 +69,7 @@ def test_stage_moves_on_when_the_recent_episodes_meet_the_threshold():
         r = result(*totals)
         cb.on_train_result(algorithm=None, result=r)
         assert r["race"]["curriculum_stage"] == 0
+        assert "curriculum_score" not in r["race"]  # not yet defined: absent, never NaN
     r = result(8, 5, 5, 2)  # latest >= 4 episodes: map 2 1/4, map 6 2/5 -> 0.325 < 0.5
     cb.on_train_result(algorithm=None, result=r)
     assert r["race"]["curriculum_score"] == pytest.approx(0.325) and not pushed
