@@ -32,7 +32,8 @@ def with_asor(algo_config: Any, **asor_settings: Any) -> Any:
 def _with_asor_doc() -> str:
     from rllib_asor.asor.config import settings_help  # stdlib only: cheap to import
 
-    head = """Return a copy of `algo_config` (PPO, SAC or CQL, new API stack, torch) with ASOR.
+    head = """Return a copy of `algo_config` (PPO, SAC, CQL, ESCP, MAPLE or MOPO; new API
+    stack, torch) with ASOR.
 
     `asor_settings` are `AsorConfig` fields (below); none gives the robust default,
     `preset="paper"` the published form, e.g. `with_asor(config, lambda_=0.1, seed=0)`.

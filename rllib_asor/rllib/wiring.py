@@ -68,9 +68,10 @@ class AsorMultiRLModuleSpec(MultiRLModuleSpec):
 
 
 def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
-    """Return a copy of `config` (PPO, SAC or CQL, new API stack, torch) with ASOR wired in.
+    """Return a copy of `config` (PPO, SAC, CQL, ESCP, MAPLE or MOPO; new API stack, torch)
+    with ASOR wired in.
 
-    `settings` are `AsorConfig` fields (listed below); none at all gives the robust default,
+    `settings` are `AsorConfig` fields; none at all gives the robust default,
     `preset="paper"` the published form. Example:
     `with_asor(PPOConfig().environment("rllib_asor/LavaWorld-v0"), lambda_=0.1, seed=0)`.
     Raises ValueError (naming the key, the value and what is allowed) for unsupported
