@@ -61,6 +61,11 @@ datasets: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m benchmarks.run_all
 
+# Each study's page, docs/studies/<name>.md, generated from its run files (studies/lib/pages.py).
+.PHONY: results
+results: $(STAMP)
+	$(PY) -m studies.lib.pages
+
 # Mutation testing (docs/testing.md; not part of `make test`): one mutmut run per package of
 # benchmarks/mutation/packages.toml, under nice, in build/mutation/<package>/. Long on 2 cores:
 # pick packages with MUTATION_PACKAGES="asor legacy"; MUTATION_ARGS="--rerun-open" retests only

@@ -1,10 +1,10 @@
-"""ESCP vs ESCP+ASOR on Walker2d under gravity shift (issue 23, item 4): a resumable runner.
+"""ESCP vs ESCP+ASOR on Walker2d under gravity shift: a resumable runner.
 
 One independent job per (method, seed), each run saved at once to RUNS/<method>-<seed>.json;
 an unfinished run is saved at every evaluation point (RUNS/<method>-<seed>.partial/) and
 continued from there; a rerun skips finished runs, so the study resumes where it stopped and several processes (one
 per core, different --seeds or --methods) can share one folder. The decision rule and budget
-are fixed in docs/results.md ("ESCP+ASOR on Walker2d: the study") before any run.
+are fixed before any run (studies/escp_walker/README.md names the commit).
 
 Methods (all on `rllib_asor/Walker2dShift-v0`, 40 training tasks of gravity ×1.5^U(-3,3),
 task_seed 0, one task per episode):
@@ -105,7 +105,7 @@ def run_one(method: str, seed: int, args: argparse.Namespace, partial: Path) -> 
     """Train one (method, seed) for `args.steps` env steps with periodic evaluations.
 
     At every evaluation point the run is saved to `partial` (the algorithm, its replay buffer,
-    the curve), and a run found there is continued from it, so a run that a session's end cuts
+    the curve), and a run found there is continued from it, so a run that is cut off
     off resumes at its last evaluation point instead of starting over.
     """
     import pickle

@@ -1,6 +1,6 @@
 """Summarise the ESCP Walker2d study: per-method returns and the paired differences with
 their 95% BCa intervals (scipy, via `rllib_asor.report.paired.paired_difference`), and the
-verdict of the rule fixed in docs/results.md ("ESCP+ASOR on Walker2d: the study").
+verdict of the rule fixed in studies/escp_walker/README.md.
 
     .venv/bin/python studies/escp_walker/summarise.py [STUDY_DIR]
 

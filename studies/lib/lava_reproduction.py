@@ -217,8 +217,9 @@ def load_runs(out: Path, layout: str = "B") -> list[dict[str, Any]]:
     return runs
 
 
-def summarize(out: Path, methods: list[str], layout: str = "B") -> str:
-    """Markdown table + PNGs from the per-run JSON files of `layout`."""
+def summarize(out: Path, methods: list[str], layout: str = "B", plots: bool = True) -> str:
+    """Markdown table (+ curves.png and pseudo_count.png if `plots`) from the per-run JSON files
+    of `layout`."""
     from rllib_asor.envs.lava import LAVA_ROWS, optimal_return
 
     runs = load_runs(out, layout)
@@ -259,7 +260,8 @@ def summarize(out: Path, methods: list[str], layout: str = "B") -> str:
         + " | ".join(f"{v:.3f}" for v in optimum)
         + " | – | – | – |"
     )
-    _plots(out, runs, methods)
+    if plots:
+        _plots(out, runs, methods)
     (out / "summary.json").write_text(json.dumps(table, indent=1))
     md = "\n".join(lines) + "\n"
     (out / "table.md").write_text(md)

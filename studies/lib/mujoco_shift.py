@@ -13,7 +13,7 @@ policy is then evaluated under the three fixed dynamics of the paper's MuJoCo ta
 
 Methods are `name[:key=value,...]`; the plain algorithm's name (`sac` or `ppo`) means no ASOR,
 any other name is ASOR with exactly the AsorConfig fields it names (nothing is merged in, so
-`asor:mode=asor` is `with_asor`'s default, the robust preset). The old SAC table (docs/results.md)
+`asor:mode=asor` is `with_asor`'s default, the robust preset). The short SAC table (docs/results.md)
 spelled its settings out:
 
     --methods sac \
@@ -220,7 +220,7 @@ def run_one(
 
 def summarize(out: Path) -> str:
     """Markdown table per algo (mean ± std over seeds) from OUT/runs/*.json (a run file without
-    `algo` is SAC). With SAC runs only, the table is the one docs/results.md shows."""
+    `algo` is SAC). With SAC runs only, one table."""
     runs = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*.json"))]
     algos = sorted({r.get("algo", "sac") for r in runs}, key=lambda a: (a != "sac", a))
     table: dict[str, Any] = {}

@@ -1,19 +1,20 @@
-"""MAPLE vs MAPLE+ASOR on the mixed-dynamics Hopper data, CQL and MOPO beside (issue 24, item 4).
+"""MAPLE vs MAPLE+ASOR on the mixed-dynamics Hopper data, CQL and MOPO beside.
 
 A resumable runner: one independent job per (dataset, method, seed), each run saved at once to
 RUNS/<dataset>-<method>-<seed>.json; a rerun skips finished runs, and a job another process is
 running (its lock file names a live pid) is skipped too, so several processes (one per core,
 different --datasets / --seeds) can share one folder. An unfinished run is saved after every
 iteration (RUNS/<name>.partial/: the algorithm with its model pool and sampler, the curve; ~0.6
-GB, not committed) and a rerun continues it from there, so a run cut off by a session's end
+GB, not committed) and a rerun continues it from there, so a run that is cut off
 loses at most one iteration. The decision rule and the budget are
-fixed in docs/results.md ("MAPLE+ASOR on the mixed-dynamics Hopper data") before any run.
+fixed before any run (studies/maple_hopper/README.md names the commit).
 
 Data: `rllib data collect` Hopper parts of one quality from all three dynamics (`original`,
-`body_mass`, `density_10`), mixed, as the paper. The study's data is committed beside this
-file (`data/`: the medium and random parts and the manifest of one `make datasets
-DATASET_STEPS=20000` build, session 14): rebuilding gives other rows on another machine, so
-every later run trains on these (`--data` points elsewhere if you want your own build). Methods:
+`body_mass`, `density_10`), mixed, as the paper. Every run trained on one build (`data/`: the
+medium and random parts and the manifest of one `make datasets DATASET_STEPS=20000` build);
+rebuilding gives other rows on another machine. The build is not in the tree: the README gives
+its sha256 fingerprints and the `git archive` command that restores it from history
+(`--data` points elsewhere if you want your own build). Methods:
 - `maple`: `MapleConfig` (tuned_examples/offline/maple-hopper.yaml's settings);
 - `maple_asor_paper`: `with_asor(..., preset="paper", lambda_=0.1)` (the paper's form, SRPO's η);
 - `maple_asor`: `with_asor(...)` (the robust default);
@@ -22,9 +23,9 @@ every later run trains on these (`--data` points elsewhere if you want your own 
   number of gradient steps.
 MAPLE, both MAPLE+ASOR and MOPO of one (dataset, seed) load the same cached ensemble (trained by
 whichever runs first; run the `maple` jobs first, or `--ensembles-only` first, or one process
-per dataset). The ensembles are committed (`ensembles/`, keyed by the data's bytes and the
-ensemble settings), so the methods of one seed may run in different sessions and still share
-theirs.
+per dataset). The ensembles are cached in `ensembles/` (keyed by the data's bytes and the
+ensemble settings; restored like the data), so the methods of one seed may run at different
+times and still share theirs.
 
 Score: the deterministic policy, `--eval-episodes` episodes under each dynamics, D4RL-normalised
 against the dataset's own random and expert returns (`rllib_asor.data.scoring.normalized_score`),
@@ -142,7 +143,7 @@ def evaluate_run(algo: Any, method: str, args: argparse.Namespace, episodes: int
 def data_fingerprint(paths: list[str]) -> str:
     """A hash of the rows of the dataset parts (not of the files' names or metadata): runs are
     only paired when they trained on the same rows (summarise.py checks; the first runs
-    trained on per-session builds, before data/ was committed)."""
+    trained on earlier builds of the data)."""
     import hashlib
 
     import pyarrow.parquet as pq
@@ -269,7 +270,7 @@ def main(argv: list[str] | None = None) -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     p.add_argument(
-        "--data", default=str(HERE / "data"), help="task dir (default: the study's committed data)"
+        "--data", default=str(HERE / "data"), help="task dir (default: the study's data, README.md)"
     )
     p.add_argument("--datasets", nargs="+", default=["medium", "random"])
     p.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
@@ -287,13 +288,13 @@ def main(argv: list[str] | None = None) -> None:
         type=int,
         default=100,
         help="cap on ensemble epochs (the port: until 5 epochs without improvement; the "
-        "study's budget: 100, docs/results.md)",
+        "study's budget: 100, studies/maple_hopper/README.md)",
     )
     p.add_argument(
         "--ensemble-cache",
         default=str(HERE / "ensembles"),
-        help="trained ensembles, one per (dataset, seed), committed (default: beside this file) "
-        "so that the methods of one seed can run in different sessions and still share it",
+        help="trained ensembles, one per (dataset, seed), cached (default: beside this file) "
+        "so that the methods of one seed can run at different times and still share it",
     )
     p.add_argument("--runs", default=str(HERE / "runs"))
     p.add_argument(
@@ -306,6 +307,11 @@ def main(argv: list[str] | None = None) -> None:
 
     from rllib_asor.data.format import read_manifest
 
+    if not (Path(args.data) / "manifest.json").exists():
+        raise SystemExit(
+            f"--data={args.data}: no manifest.json; restore the study's data "
+            "(studies/maple_hopper/README.md) or make your own with `make datasets`"
+        )
     read_manifest(args.data)  # fails here, naming `make datasets`, when the data is missing
     for d in args.datasets:
         for path in parts(args, d):

@@ -1,7 +1,7 @@
 """Summarise the MAPLE Hopper study (run.py): the table beside the paper and the fixed rule.
 
 Reads RUNS/*.json; writes table.md and summary.json beside RUNS and prints the table. The rule
-(docs/results.md, "MAPLE+ASOR on the mixed-dynamics Hopper data", fixed before any run):
+(studies/maple_hopper/README.md, fixed before any run):
 Δ = score(MAPLE+ASOR) − score(MAPLE) per (dataset, seed), pooled over Hopper-medium and
 Hopper-random; its mean with a 95 % BCa bootstrap interval (`rllib_asor.report.paired`:
 scipy, 5,000 resamples, fixed seed) and the Wilcoxon signed-rank p.
@@ -11,12 +11,12 @@ scipy, 5,000 resamples, fixed seed) and the Wilcoxon signed-rank p.
 - otherwise inconclusive.
 Applied to the paper preset (primary) and the robust default; "which preset the evidence
 favours": the same interval on Δ(robust − paper). MOPO and CQL are references (no test; the
-rows MAPLE − MOPO and MAPLE − CQL check the base, the second added in session 20).
+rows MAPLE − MOPO and MAPLE − CQL check the base, the second added after the rule).
 A comparison with fewer pairs than it can have (the rule's 6; 5 for the methods that started
 after the data was committed, since medium seed 0 ran on an earlier build) is labelled interim:
 a bootstrap interval over 3-4 pairs lies above 0 whenever all Δ are positive (with no effect:
-1 chance in 8 or 16), so an interim interval is not the rule's verdict (label added in session
-19, after the robust form's 4th pair).
+1 chance in 8 or 16), so an interim interval is not the rule's verdict (label added after the
+robust form's 4th pair).
 One exploratory row, chosen after 3 pairs and not part of the rule: the same Δ on the mean of
 each run's evaluations in the second half of training (`late_score`), because single end points
 moved by ±20 within a run.
