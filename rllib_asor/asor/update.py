@@ -253,16 +253,18 @@ def asor_update(
     if metrics:
         metrics.update(
             {
-                # |λ·b| / reward scale for the per-step amount added and for the bonus
-                # itself (the potential Φ when shaping).
+                # "The bonus": the per-step amount added to the reward, mean |Δr| ÷ the env
+                # reward's running RMS; the potential's size |λ·Φ| (what bonus_share_max caps;
+                # the same number without potential shaping) is `potential_share`.
                 "bonus_share": float(delta.abs().mean() / rms),
                 "potential_share": float((lam_eff * potential_of).abs().mean() / rms),
-                "critic_ev": ev if ev is not None else float("nan"),
                 "active": float(active),
                 "share_capped": float(capped),
                 "potential": float(potential),
             }
         )
+        if ev is not None:  # no episode chunks (off-policy, offline): absent, never NaN
+            metrics["critic_ev"] = ev
     return AsorResult(delta, disc_feats, labels, metrics)
 
 

@@ -59,10 +59,30 @@ def _finite(value: Any) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def drop_nan_learner_stats(result: dict[str, Any]) -> None:
+    """Remove the NaN leaves of `result["learners"]` in place. RLlib 2.60 logs each module's
+    `num_trainable_parameters` once, at build, and reports NaN for it in every later
+    iteration; a metric with no value this iteration is absent instead."""
+
+    def prune(tree: dict[str, Any]) -> None:
+        for key in list(tree):
+            value = tree[key]
+            if isinstance(value, dict):
+                prune(value)
+            elif isinstance(value, float) and math.isnan(value):
+                del tree[key]
+
+    learners = result.get("learners")
+    if isinstance(learners, dict):
+        prune(learners)
+
+
 class AsorMetricsCallback(RLlibCallback):
-    """Adds `result["asor"]` after every training iteration."""
+    """Adds `result["asor"]` after every training iteration (and drops the NaN leaves of
+    `result["learners"]`, `drop_nan_learner_stats`)."""
 
     def on_train_result(self, *, algorithm: Any = None, result: dict, **kwargs: Any) -> None:
+        drop_nan_learner_stats(result)
         lifted = lift_asor_metrics(result)
         if lifted:
             result["asor"] = lifted
