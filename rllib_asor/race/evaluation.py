@@ -1,6 +1,6 @@
 """The race's evaluation: a trained policy on every map, on course seeds training never drew.
 
-Used by `rllib quickstart` (`make train`) and `benchmarks.race_learning`, so the numbers they
+Used by `rllib quickstart` (`make train`) and `studies.lib.race_learning`, so the numbers they
 print are measured the same way: one racer, `episodes` courses per map with course seeds
 `EVAL_SEED0 + episode`, all envs stepped together in one batch; a GIF of one episode.
 """
