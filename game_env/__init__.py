@@ -2,12 +2,13 @@
 
 ``gymnasium.make("game_env/ObstacleRace-v0", map_id=...)`` for one racer,
 ``game_env.parallel_env(num_racers=N, map_id=...)`` for a PettingZoo ParallelEnv.
+Importing it loads no GL library: MuJoCo's rendering backend is chosen at the first render
+(`game_env.gl`), so a machine without any GL can simulate and train.
 """
 
-import os
+from game_env.gl import import_mujoco
 
-if "DISPLAY" not in os.environ:  # headless: MuJoCo's offscreen renderer through EGL
-    os.environ.setdefault("MUJOCO_GL", "egl")
+import_mujoco()  # before any module of ours imports it: no GL library is loaded at import
 
 import gymnasium  # noqa: E402
 

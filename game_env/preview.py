@@ -8,18 +8,14 @@ imageio; a GIF if that writer is missing, e.g. mp4 without ffmpeg; else a folder
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
-if "DISPLAY" not in os.environ:
-    os.environ.setdefault("MUJOCO_GL", "egl")
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from game_env.maps import MAPS, check_map_id  # noqa: E402
-from game_env.render import RaceRenderer  # noqa: E402
-from game_env.scripted import ScriptedRacer  # noqa: E402
-from game_env.sim import RaceSim  # noqa: E402
+from game_env.maps import MAPS, check_map_id
+from game_env.render import RaceRenderer
+from game_env.scripted import ScriptedRacer
+from game_env.sim import RaceSim
 
 
 def _save_png(frame: np.ndarray, path: Path) -> None:

@@ -1,15 +1,19 @@
-"""Offscreen rendering with MuJoCo's renderer (headless: MUJOCO_GL=egl)."""
+"""Offscreen rendering with MuJoCo's renderer; the GL backend (egl, osmesa, glfw) is chosen
+at the first renderer (`game_env.gl`)."""
 
 from __future__ import annotations
 
 import mujoco
 import numpy as np
 
+from game_env.gl import gl_context_class
+
 
 class RaceRenderer:
     """Renders a chase view of one racer, or an overview of the whole course."""
 
     def __init__(self, model: mujoco.MjModel, width: int = 320, height: int = 240) -> None:
+        gl_context_class()  # the backend, or GLUnavailableError saying what to install
         self.renderer = mujoco.Renderer(model, height=height, width=width)
         for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION):
             self.renderer.scene.flags[flag] = False

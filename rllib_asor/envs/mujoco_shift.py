@@ -46,8 +46,11 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 import gymnasium as gym
-import mujoco
 import numpy as np
+
+from game_env.gl import import_mujoco
+
+mujoco = import_mujoco()  # loads no GL library (MUJOCO_GL=egl on a machine without libEGL)
 
 MULTIPLIER_PARAMS = ("mass", "inertia", "damping", "friction", "gravity")
 SAMPLED_PARAMS = (*MULTIPLIER_PARAMS, "wind")
