@@ -455,7 +455,9 @@ def test_cli_success_writes_report_and_prints_path(
     args = parse([str(fixture_results), "--out", str(out), "--last-n", "2"])
     assert (args.metric, args.x) == (summary.DEFAULT_METRIC, summary.DEFAULT_X)
     assert cli.run(args) == 0
-    assert capsys.readouterr().out.strip() == str(out / "report.md")
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-1] == f"report: {out / 'report.md'}"
+    assert lines[0].startswith(("Paired answer", "Unpaired"))
     assert "last 2 iteration(s)" in (out / "report.md").read_text()
 
 

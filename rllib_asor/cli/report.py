@@ -5,7 +5,9 @@ per training iteration, and ``params.json``, the trial's algorithm config; symli
 groups trials by env, method (``PPO``, ``PPO+ASOR``, ``SAC+SRPO``, ...) and every other setting
 that differs besides the seed, and writes ``report.md``,
 ``summary.json`` and one ``curves_<env>.png`` per env into the output folder. Files are written
-atomically (temp file + ``os.replace``).
+atomically (temp file + ``os.replace``). Prints first the paired answer (`rllib compare`'s, when
+the folder has a baseline and a treatment with seeds in common) or that the numbers are unpaired,
+then one line per group whose ASOR looks inert, then the report's path.
 
 Argument parsing only: reading, statistics and rendering are `rllib_asor.report`.
 """
@@ -16,7 +18,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from rllib_asor.report.render import make_report
+from rllib_asor.report.render import write_report
 from rllib_asor.report.summary import DEFAULT_METRIC, DEFAULT_X
 
 
@@ -70,7 +72,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run `rllib report`; 0 on success, 2 (one line on stderr) on bad input."""
     try:
-        md = make_report(
+        report, md = write_report(
             args.results_dir,
             args.out,
             metric=args.metric,
@@ -85,7 +87,12 @@ def run(args: argparse.Namespace) -> int:
     except OSError as e:
         print(f"rllib report: error: {e}", file=sys.stderr)
         return 1
-    print(md)
+    for line in report.lead:
+        print(line)
+    for group in report.groups:
+        if group.asor_health:
+            print(group.asor_health)
+    print(f"report: {md}")
     return 0
 
 

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from rllib_asor.report.grouping import Group, differing_settings, group_trials, trial_seed
+from rllib_asor.report.health import group_health
 from rllib_asor.report.paired import CI_METHOD, Paired, paired_difference
 from rllib_asor.report.results import Trial, asor_mode, find_trials
 from rllib_asor.report.scores import Source, choose_source, dynamics_scores, score
@@ -25,6 +26,8 @@ class Comparison:
     results: list[Paired]
     """Per env and treatment: the overall comparison, then one per dynamics id."""
     notes: list[str] = field(default_factory=list)
+    health: dict[str, list[str]] = field(default_factory=dict)
+    """Per env: one line per group whose ASOR looks inert (`rllib_asor.report.health`)."""
 
 
 def load_trials(results_dirs: Sequence[str | os.PathLike[str]], notes: list[str]) -> list[Trial]:
@@ -96,6 +99,8 @@ def compare(
             notes.append(f"{env}: one group only ({mine[0].label!r}), nothing to compare")
             continue
         base = pick_baseline(groups, env, baseline)
+        inert = {g.label: group_health(g.label, [t.rows for t in g.trials]) for g in mine}
+        comp.health[env] = [line for line in inert.values() if line]
         source = choose_source([t for g in mine for t in g.trials], metric)
         comp.sources[env] = source
         base_scores = _scores(base, source, last_n, notes)
@@ -110,6 +115,7 @@ def compare(
                 notes.append(f"{env}: {e} (with a finite score); not compared")
                 continue
             res.env, res.differs_in = env, differing_settings(base, g)
+            res.asor_health = inert[g.label]
             comp.results.append(res)
             treat_dyn = _dynamics(g, source, last_n)
             for did in sorted(base_dyn.keys() & treat_dyn.keys(), key=_natural):
@@ -172,6 +178,7 @@ def render_text(comp: Comparison) -> str:
         for r in main:
             out.append(f"{r.treatment} vs {r.baseline} (differs in: {', '.join(r.differs_in)}): "
                        f"{r.verdict}")  # fmt: skip
+        out += comp.health.get(env, [])
         dyn = [r for r in comp.results if r.env == env and r.dynamics is not None]
         if dyn:
             out += [

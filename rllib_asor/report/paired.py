@@ -57,6 +57,8 @@ class Paired:
     dynamics: str | None = None
     differs_in: list[str] = field(default_factory=list)
     diffs: list[float] = field(default_factory=list)
+    asor_health: str | None = None
+    """One line when the treatment's ASOR looks inert (`rllib_asor.report.health`)."""
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-able dict (NaN -> None)."""

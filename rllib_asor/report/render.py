@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rllib_asor.report.files import atomic_write, jsonable
+from rllib_asor.report.lead import paired_lead
 from rllib_asor.report.plots import plot_curves
 from rllib_asor.report.stats import BOOTSTRAP_RESAMPLES
 from rllib_asor.report.summary import DEFAULT_METRIC, DEFAULT_X, Report, summarize
@@ -49,9 +50,13 @@ def plot_env(report: Report, env: str, path: Path) -> None:
 
 def render_markdown(report: Report, results_dir: Path, plots: dict[str, str]) -> str:
     """The report as markdown: one table per env, its curve, the trials, notes."""
-    out = [
-        "# Training report",
-        "",
+    out = ["# Training report", ""]
+    if report.lead:
+        out += [*report.lead, ""]
+    health = [g.asor_health for g in report.groups if g.asor_health]
+    if health:
+        out += ["ASOR looks inert:", "", *(f"- {h}" for h in health), ""]
+    out += [
         f"- results: `{results_dir}`",
         f"- metric: `{report.metric}`; final value per trial = mean of its last "
         f"{report.last_n} iteration(s)",
@@ -123,8 +128,22 @@ def make_report(
 
     Raises ValueError for a missing directory, no results, or a metric no trial reports.
     """
+    return write_report(results_dir, out_dir, metric, x, last_n, group_by, columns)[1]
+
+
+def write_report(
+    results_dir: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str] | None = None,
+    metric: str = DEFAULT_METRIC,
+    x: str = DEFAULT_X,
+    last_n: int = 1,
+    group_by: str | None = None,
+    columns: Sequence[str] | None = None,
+) -> tuple[Report, Path]:
+    """`make_report`, returning the `Report` (its lead lines and ASOR health) too."""
     root = Path(results_dir).expanduser()
     report = summarize(root, metric, x, last_n, group_by, columns)
+    report.lead = paired_lead(root)
     out = Path(out_dir).expanduser() if out_dir is not None else root / "report"
     out.mkdir(parents=True, exist_ok=True)
     plots: dict[str, str] = {}
@@ -149,9 +168,11 @@ def make_report(
                 "finals": g.finals,
                 "extra": {k: list(v) for k, v in g.extra.items()},
                 "settings": g.settings,
+                "asor_health": g.asor_health,
             }
             for g in report.groups
         ],
+        "lead": report.lead,
         "notes": report.notes,
     }
     atomic_write(
@@ -160,4 +181,4 @@ def make_report(
     )
     md = out / "report.md"
     atomic_write(md, render_markdown(report, root, plots).encode())
-    return md
+    return report, md

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rllib_asor.report.grouping import group_trials
+from rllib_asor.report.health import group_health
 from rllib_asor.report.results import Trial, find_trials
 from rllib_asor.report.stats import bootstrap_ci, iqm, mean_std
 
@@ -24,7 +25,8 @@ EXTRA_METRIC_RE = re.compile(r"(^|/)(race|asor)/")
 """Result keys eligible as extra columns: ``race/...`` and ``asor/...`` metrics."""
 
 HEADLINE_ASOR = ("disc_acc", "aug_reward_mean", "bonus_share", "lambda", "active")
-"""ASOR metrics shown by default (``--columns all`` shows every one)."""
+"""ASOR metrics shown by default (``--columns all`` shows every one); `bonus_share` is "the
+bonus": the per-step amount ASOR adds, mean |Δr| ÷ the env reward's running RMS."""
 HEADLINE_RACE = ("success_rate", "trapped_rate", "unnecessary_jump_rate", "goal_reward")
 """Race metrics shown by default: the paper's table, over all maps (per map: ``--columns all``)."""
 
@@ -47,6 +49,8 @@ class GroupStats:
     """Extra column key -> (mean, std) over the group's trials that report it."""
     settings: dict[str, str] = field(default_factory=dict)
     """The params keys (and values) that tell this group apart from the env's other groups."""
+    asor_health: str | None = None
+    """One line when ASOR looks inert in the group's trials (`rllib_asor.report.health`)."""
 
 
 @dataclass
@@ -60,6 +64,8 @@ class Report:
     trials: list[Trial]
     columns: list[str]
     notes: list[str]
+    lead: list[str] = field(default_factory=list)
+    """The report's first lines: the paired answer, or where it is (`rllib_asor.report.lead`)."""
 
 
 # --------------------------------------------------------------------------- statistics
@@ -135,10 +141,11 @@ def summarize(
         lo, hi = bootstrap_ci(finals)
         steps = float(np.nanmean([t.final(x, 1) for t in members]))
         extra = {c: mean_std([t.final(c, last_n) for t in members]) for c in columns}
+        health = group_health(f"{env}: {method}", [t.rows for t in members])
         groups.append(
             GroupStats(
                 env, method, len(members), mean, std, lo, hi, iqm(finals), steps, finals, extra,
-                settings[(env, method)],
+                settings[(env, method)], health,
             )
         )  # fmt: skip
     return Report(metric, x, last_n, groups, with_metric, list(columns), notes)
