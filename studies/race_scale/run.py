@@ -1,0 +1,151 @@
+"""Race: the many-runner setting (ppo-asor-scale.yaml) against today's example (ppo-asor.yaml).
+
+Each run trains one YAML as written (its env runners, batch, minibatch, Learner device), seed
+`s` (the algorithm's and ASOR's), until `--steps` env steps, then evaluates its stochastic
+policy on 3 unseen courses per map (`rllib_asor.race.evaluation`, as studies/race_250k) and
+writes OUT/runs/<method>-<seed>.json (`eval.per_map.*.success` is the rule's metric). A rerun
+skips the runs that exist; an unfinished run starts again. Runs go to Ray as tasks, as many at
+once as the node's CPUs and GPUs allow (a scale run needs 16 CPUs and the GPU).
+
+    python studies/race_scale/run.py --seeds 20 --steps 500000 --out studies/race_scale
+    python studies/race_scale/run.py --seeds 1 --steps 2048 --layout cpu --out /tmp/race_scale  # smoke
+
+`--layout cpu` (smoke tests only, recorded in each run file and never mixed with `asis`):
+the Learner on the CPU, sampling in the run's process with the YAML's total number of envs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+METHODS = {
+    "today": ROOT / "tuned_examples/race/ppo-asor.yaml",
+    "scale": ROOT / "tuned_examples/race/ppo-asor-scale.yaml",
+}
+EVAL_EPISODES = 3
+MAX_EPISODE_STEPS = 1000
+
+
+def build_config(method: str, seed: int, steps: int, layout: str) -> Any:
+    """The YAML's AlgorithmConfig with ASOR, seeded; `layout="cpu"` moves it onto one CPU
+    process (same total envs, same batch, minibatch and epochs)."""
+    import rllib_asor
+    from rllib_asor.cli import experiment
+
+    [exp] = experiment.load_file(str(METHODS[method]))
+    config = experiment.validate(exp)
+    config = config.debugging(seed=seed)
+    if layout == "cpu":
+        envs = max(1, config.num_env_runners) * config.num_envs_per_env_runner
+        config = config.env_runners(num_env_runners=0, num_envs_per_env_runner=envs).learners(
+            num_learners=0, num_gpus_per_learner=0
+        )
+    return rllib_asor.with_asor(config, **{**(exp.asor or {}), "seed": seed})
+
+
+def run_one(spec: dict[str, Any]) -> dict[str, Any]:
+    """Train one (method, seed) to the budget, evaluate, return the run record."""
+    import torch
+
+    from rllib_asor.race.config import register_race_envs
+    from rllib_asor.race.evaluation import evaluate, module_policy
+
+    torch.set_num_threads(1)
+    register_race_envs()
+    algo = build_config(spec["method"], spec["seed"], spec["steps"], spec["layout"]).build_algo()
+    curve, steps, t0 = [], 0, time.time()
+    while steps < spec["steps"]:
+        result = algo.train()
+        steps = int(result["num_env_steps_sampled_lifetime"])
+        race = result.get("race", {})
+        curve.append([steps, race.get("success_rate", float("nan")), time.time() - t0])
+    train_s = time.time() - t0
+    ev = evaluate(module_policy(algo.get_module(), explore=True), EVAL_EPISODES, MAX_EPISODE_STEPS)
+    algo.stop()
+    return {
+        "method": spec["method"],
+        "seed": spec["seed"],
+        "layout": spec["layout"],
+        "budget": spec["steps"],
+        "steps": steps,
+        "train_wall_s": train_s,
+        "eval": ev,
+        "curve": curve,
+    }
+
+
+def resources(method: str, layout: str) -> dict[str, float]:
+    """What one run's Ray task holds (its env runners ask for their own CPUs)."""
+    if layout == "cpu":
+        return {"num_cpus": 1, "num_gpus": 0}
+    return {"num_cpus": 1, "num_gpus": 1 if method == "scale" else 0}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--steps", type=int, default=500_000, help="env-step budget per run")
+    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    parser.add_argument("--layout", choices=["asis", "cpu"], default="asis")
+    parser.add_argument("--out", default="studies/race_scale")
+    args = parser.parse_args(argv)
+    if args.seeds < 1 or args.steps < 1:
+        parser.error(f"--seeds {args.seeds} / --steps {args.steps}: allowed integers ≥ 1")
+    runs = Path(args.out).resolve() / "runs"
+    runs.mkdir(parents=True, exist_ok=True)
+    specs = []
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
+        for method in args.methods:
+            path = runs / f"{method}-{seed}.json"
+            if path.exists():
+                have = json.loads(path.read_text())
+                if (have.get("layout"), have.get("budget")) != (args.layout, args.steps):
+                    parser.error(
+                        f"{path} was made with layout {have.get('layout')!r}, budget "
+                        f"{have.get('budget')}: allowed the same --layout and --steps, or another --out"
+                    )
+                continue
+            specs.append(
+                {"method": method, "seed": seed, "steps": args.steps, "layout": args.layout}
+            )
+    if not specs:
+        print("every run exists")
+        return 0
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import ray
+
+    ray.init(include_dashboard=False, log_to_driver=False, configure_logging=False)
+    sys.path.insert(0, str(ROOT))
+    pending = {
+        ray.remote(**resources(s["method"], s["layout"]))(run_one).remote(s): s for s in specs
+    }
+    while pending:
+        [done], _ = ray.wait(list(pending), num_returns=1)
+        spec = pending.pop(done)
+        record = ray.get(done)
+        path = runs / f"{spec['method']}-{spec['seed']}.json"
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(record))
+        os.replace(tmp, path)
+        success = record["eval"]["mean"]["success"]
+        print(
+            f"{spec['method']}-{spec['seed']}: success {success:.2f}, "
+            f"{record['steps']} env steps in {record['train_wall_s']:.0f} s",
+            flush=True,
+        )
+    ray.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
