@@ -42,11 +42,17 @@ HARMLESS = re.compile(
             "won't fully utilize the available concurrency",
             "  warnings.warn(",  # the second line of a Python warning already dropped
             "PYTHON worker processes have been started",  # raylet, fractional-CPU actors
+            # gymnasium, once per env runner: RLlib re-registers its own wrapper env id
+            "Overriding environment rllib-single-agent-env-v0",
+            "Overriding environment rllib-multi-agent-env-v0",
+            'logger.warn(f"Overriding environment {new_spec.id} already in registry.")',
         )
     )
 )
 """Substrings of the messages dropped (each seen on every run, none actionable)."""
 RAY_LOGGERS = ("ray", "ray.tune", "ray.rllib", "ray.train", "gymnasium")
+RLLIB_ENV_OVERRIDE = r".*Overriding environment rllib-(single|multi)-agent-env-v0 "
+"""gymnasium's warning (a Python warning in the driver) when RLlib re-registers its env id."""
 
 
 def verbose() -> bool:
@@ -74,6 +80,7 @@ def quiet_driver() -> None:
             if not any(isinstance(f, _DropHarmless) for f in handler.filters):
                 handler.addFilter(drop)
     warnings.filterwarnings("ignore", category=DeprecationWarning, module="ray")
+    warnings.filterwarnings("ignore", message=RLLIB_ENV_OVERRIDE)
 
 
 def import_quietly(module: str) -> None:

@@ -52,3 +52,41 @@ def test_driver_logger_filter_and_verbose_switch(monkeypatch, caplog):
     monkeypatch.setattr(dispatcher, "handlers", handlers)
     quiet.quiet_worker_lines()  # verbose: left as it is
     assert dispatcher.handlers[0][1] == seen.append
+
+
+def _gym_override_warning_lines() -> list[str]:
+    """The lines an env runner prints when RLlib registers its env id again: gymnasium's real
+    warning, formatted as Python prints it (the message, then the source line)."""
+    import warnings
+
+    import gymnasium as gym
+
+    env_id = "rllib-single-agent-env-v0"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gym.register(env_id, entry_point="gymnasium.envs.classic_control:CartPoleEnv")
+        gym.register(env_id, entry_point="gymnasium.envs.classic_control:CartPoleEnv")
+    gym.registry.pop(env_id, None)
+    (w,) = [w for w in caught if "Overriding environment" in str(w.message)]
+    return warnings.formatwarning(w.message, w.category, w.filename, w.lineno).splitlines()
+
+
+def test_gymnasiums_env_override_warning_is_dropped_from_workers_and_driver(monkeypatch):
+    import warnings
+
+    lines = _gym_override_warning_lines()
+    assert len(lines) == 2 and "Overriding environment rllib-single-agent-env-v0" in lines[0]
+    seen = []
+    quiet._filtered(seen.append)({"lines": [*lines, "UserWarning: WARN: something else"]})
+    assert seen == [{"lines": ["UserWarning: WARN: something else"]}]
+
+    monkeypatch.delenv(quiet.VERBOSE_ENV, raising=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        quiet.quiet_driver()
+        warnings.warn("\x1b[33mWARN: Overriding environment rllib-single-agent-env-v0 "
+                      "already in registry.\x1b[0m", UserWarning, stacklevel=1)  # fmt: skip
+        warnings.warn("WARN: Overriding environment MyEnv-v0 already in registry.", stacklevel=1)
+    messages = [str(w.message) for w in caught]
+    assert not any("rllib-single-agent-env-v0" in m for m in messages)
+    assert any("MyEnv-v0" in m for m in messages)  # a user's own override still shows
