@@ -20,8 +20,11 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip setuptools wheel $(PIP_FILTER)
 	# torch pinned to the CPU build (a local wheel here); never an open `torch` requirement.
 	$(PY) -m pip install -q "torch==2.13.0" $(PIP_FILTER)
-	# compat: a plain .pth to the source tree (the default finder prints a notice per install)
-	$(PY) -m pip install -q -e ".[test,docs]" --config-settings editable_mode=compat $(PIP_FILTER)
+	# compat: a plain .pth to the source tree. With setuptools 84 and pip 26 every editable mode
+	# prints a banner (compat: "transitional"; lenient, strict: a notice); this one message is
+	# hidden by a Python warning filter, which pip passes on to the build backend.
+	PYTHONWARNINGS="ignore:Compat editable installs" \
+	  $(PY) -m pip install -q -e ".[test,docs]" --config-settings editable_mode=compat $(PIP_FILTER)
 	touch $(STAMP)
 
 install: $(STAMP)
