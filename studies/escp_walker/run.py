@@ -105,8 +105,8 @@ def run_one(method: str, seed: int, args: argparse.Namespace, partial: Path) -> 
     """Train one (method, seed) for `args.steps` env steps with periodic evaluations.
 
     At every evaluation point the run is saved to `partial` (the algorithm, its replay buffer,
-    the curve), and a run found there is continued from it, so a run that is cut off
-    off resumes at its last evaluation point instead of starting over.
+    the curve), and a run found there is continued from it, so a run that is cut off resumes
+    at its last evaluation point instead of starting over.
     """
     import pickle
 
