@@ -21,6 +21,9 @@ from rllib_asor.cli.errors import UsageError, one_line
 
 CHECKPOINT_MARKER = "rllib_checkpoint.json"
 CTOR_FILE = "class_and_ctor_args.pkl"
+EVAL_SEED = 1_000_000
+"""Default env seed of the evaluation: `rllib ab`'s, so that `rllib evaluate` reproduces the
+returns `rllib ab` wrote (with `--evaluation-config`, which `rllib ab` uses too)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,7 +39,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="sample actions from the policy (default: deterministic)",
     )
-    parser.add_argument("--seed", type=int, help="seed of the evaluation env")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=EVAL_SEED,
+        help=f"seed of the evaluation env (default {EVAL_SEED}, the seed rllib ab evaluates with)",
+    )
     parser.add_argument(
         "--evaluation-config",
         action="store_true",
@@ -268,6 +276,9 @@ def _print(stats: dict[str, Any]) -> None:
     policy = "stochastic (--explore)" if stats["explore"] else "deterministic"
     print(f"checkpoint: {stats['checkpoint']}")
     print(f"env: {stats['env']}  episodes: {stats['episodes']}  policy: {policy}")
+    seed = stats["seed"]
+    same = " (the default: the seed rllib ab evaluates with)" if seed == EVAL_SEED else ""
+    print(f"seed: {seed}{same}")
     print(
         f"return: mean {stats['return_mean']:.3f}  std {stats['return_std']:.3f}  "
         f"min {stats['return_min']:.3f}  max {stats['return_max']:.3f}"

@@ -97,6 +97,7 @@ def test_evaluate_checkpoint_json(cartpole):
     assert stats["episodes"] == 3 and len(stats["returns"]) == 3
     assert stats["env"] == "CartPole-v1"
     assert stats["return_mean"] == pytest.approx(sum(stats["returns"]) / 3)
+    assert stats["seed"] == 1_000_000  # rllib ab's evaluation seed, by default
 
 
 def test_evaluate_finds_latest_checkpoint_in_experiment_dir(cartpole):
@@ -104,6 +105,7 @@ def test_evaluate_finds_latest_checkpoint_in_experiment_dir(cartpole):
     assert res.rc == 0, res.err[-2000:]
     assert "return: mean" in res.out and "episode returns:" in res.out
     assert "checkpoint_" in res.out
+    assert "seed: 1000000 (the default: the seed rllib ab evaluates with)" in res.out
 
 
 def test_resume_finished_experiment_exits_0_without_new_trials(cartpole):
