@@ -1,0 +1,122 @@
+"""One table for `scripts/gpu_check.sh`: the gpu tests' counts, the scaling figures, the targets.
+
+    python -m benchmarks.gpu_check_summary benchmarks/out/gpu_check
+
+Reads OUT/gpu_tests.xml (pytest's junit report), OUT/mb256/scaling.json and
+OUT/mb2048/scaling.json (`benchmarks.scaling`); a missing file is a row that says so. The
+targets are those for a 16-core node with one GPU: PPO+ASOR end to end at the most runners
+≥ 8× its 1-runner rate, the GPU Learner alone ≥ 10,000 env steps/s, PPO+ASOR ≥ 0.9× PPO at
+the most runners. On a CPU they are shown, not judged.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+LABELS = {"ppo": "PPO", "asor": "PPO+ASOR"}
+
+
+def test_counts(xml: Path) -> str:
+    """'passed P, failed F, skipped S' from a junit report, or why there is none."""
+    if not xml.exists():
+        return "no report (pytest missing, or it was stopped by the time limit)"
+    root = ET.parse(xml).getroot()
+    suite = root if root.tag == "testsuite" else root.find("testsuite")
+    if suite is None:
+        return "unreadable report"
+    n = {k: int(suite.get(k, 0)) for k in ("tests", "failures", "errors", "skipped")}
+    passed = n["tests"] - n["failures"] - n["errors"] - n["skipped"]
+    return f"passed {passed}, failed {n['failures'] + n['errors']}, skipped {n['skipped']}"
+
+
+def load(path: Path) -> dict[str, Any] | None:
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def rate(res: dict[str, Any] | None, algo: str, runners: int, part: str) -> float | None:
+    for row in (res or {}).get("rows", []):
+        if row["algo"] == algo and row["runners"] == runners and isinstance(row.get(part), float):
+            return row[part]
+    return None
+
+
+def fmt(x: float | None, digits: int = 0) -> str:
+    return "—" if x is None else f"{x:,.{digits}f}"
+
+
+def targets(mb256: dict[str, Any] | None, mb2048: dict[str, Any] | None) -> list[list[str]]:
+    """Rows (check, measured, target, verdict) of the GPU node's targets."""
+    counts = sorted({r["runners"] for r in (mb256 or {}).get("rows", [])})
+    cuda = (mb256 or {}).get("settings", {}).get("device") == "cuda"
+    rows = []
+    if counts:
+        lo, hi = counts[0], counts[-1]
+        one, many = rate(mb256, "asor", lo, "e2e"), rate(mb256, "asor", hi, "e2e")
+        ratio = many / one if one and many else None
+        ppo = rate(mb256, "ppo", hi, "e2e")
+        rel = many / ppo if many and ppo else None
+        learners = [
+            row["learner"]
+            for res in (mb256, mb2048)
+            for row in (res or {}).get("rows", [])
+            if isinstance(row.get("learner"), float)
+        ]
+        best = max(learners, default=None)
+        rows = [
+            [f"PPO+ASOR end to end, {hi} ÷ {lo} runners", fmt(ratio, 2), "≥ 8", ratio, 8.0],
+            ["Learner alone, best (env steps/s)", fmt(best), "≥ 10,000", best, 10_000.0],
+            [f"PPO+ASOR ÷ PPO end to end, {hi} runners", fmt(rel, 2), "≥ 0.9", rel, 0.9],
+        ]
+    out = []
+    for check, shown, target, value, bar in rows:
+        if not cuda:
+            verdict = "not judged (CPU)"
+        elif value is None:
+            verdict = "not measured"
+        else:
+            verdict = "met" if value >= bar else "NOT met"
+        out.append([check, shown, target, verdict])
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    out = Path((argv if argv is not None else sys.argv[1:])[0])
+    mb256, mb2048 = load(out / "mb256" / "scaling.json"), load(out / "mb2048" / "scaling.json")
+    lines = ["", "| check | measured | target | verdict |", "|---|---|---|---|"]
+    lines.append(
+        f"| gpu tests (`pytest -m gpu`) | {test_counts(out / 'gpu_tests.xml')} | all pass | |"
+    )
+    for name, res in (("minibatch 256", mb256), ("minibatch 2048", mb2048)):
+        if res is None:
+            lines.append(f"| scaling benchmark, {name} | no result (see its log) | | |")
+            continue
+        device = {r.get("learner_device") for r in res["rows"]} - {None}
+        lines.append(
+            f"| scaling benchmark, {name} | {res['machine']}, Learner on "
+            f"{', '.join(sorted(device)) or '—'}, {res['wall_s']:.0f} s | | |"
+        )
+        for row in res["rows"]:
+            parts = [
+                f"{p} {fmt(row.get(p))}"
+                for p in ("e2e", "sample", "learner")
+                if row.get(p) is not None
+            ]
+            if parts:
+                lines.append(
+                    f"| {LABELS[row['algo']]}, {row['runners']} runner(s) (env steps/s) "
+                    f"| {'; '.join(parts)} | | |"
+                )
+        for note in res.get("notes", []):
+            lines.append(f"| note | {note} | | |")
+    for check, shown, target, verdict in targets(mb256, mb2048):
+        lines.append(f"| {check} | {shown} | {target} | {verdict} |")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

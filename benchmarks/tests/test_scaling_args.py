@@ -1,0 +1,98 @@
+"""benchmarks.scaling's arguments and benchmarks.gpu_check_summary's verdicts (no Ray, no
+training): bad input is one line naming the flag, runner counts are cut to the machine, and
+the GPU targets are judged only on CUDA results."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from benchmarks import gpu_check_summary as summary
+from benchmarks import scaling
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_runner_counts_are_cut_to_the_cpus_the_machine_has() -> None:
+    assert scaling.parse_runners("1,2,4,8,14", cpus=2) == [1, 2]
+    assert scaling.parse_runners("1,2,4,8,14", cpus=16) == [1, 2, 4, 8, 14]
+    assert scaling.parse_runners("4", cpus=2) == [1]  # nothing fits: one runner
+
+
+@pytest.mark.parametrize("text", ["", "0", "1,x", "-2", "1,,0"])
+def test_bad_runner_counts_name_the_flag(text: str) -> None:
+    with pytest.raises(ValueError, match=r"--runners .* allowed positive integers"):
+        scaling.parse_runners(text, cpus=4)
+
+
+def test_bad_input_is_one_line_and_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert scaling.main(["--device", "gpu"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "scaling: --device 'gpu' is invalid: allowed cpu or cuda"
+    assert scaling.main(["--parts", "learner,train"]) == 2
+    assert "--parts 'learner,train' is invalid: allowed a comma list of learner" in (
+        capsys.readouterr().err
+    )
+    assert scaling.main(["--epochs", "0"]) == 2
+    assert "--epochs 0 is invalid" in capsys.readouterr().err
+
+
+def test_quick_settles_small_defaults_and_flags_override_them() -> None:
+    args = scaling.settle(scaling.build_parser().parse_args(["--quick", "--runners", "1,2"]))
+    assert (args.record_batches, args.learner_passes, args.iters, args.trials) == (3, 1, 2, 2)
+    assert args.algo_list == ["ppo", "asor"] and args.part_list == list(scaling.PARTS)
+    args = scaling.settle(scaling.build_parser().parse_args(["--quick", "--iters", "7"]))
+    assert args.iters == 7
+
+
+def scaling_json(device: str, e2e: dict[tuple[str, int], float], learner: float) -> dict:
+    rows = [
+        {"algo": a, "runners": n, "e2e": v, "learner": learner, "learner_device": device}
+        for (a, n), v in e2e.items()
+    ]
+    return {"machine": "x", "wall_s": 1.0, "settings": {"device": device}, "rows": rows}
+
+
+def test_targets_are_judged_on_cuda_only() -> None:
+    e2e = {("ppo", 1): 600.0, ("asor", 1): 500.0, ("ppo", 14): 5000.0, ("asor", 14): 4400.0}
+    rows = summary.targets(scaling_json("cuda", e2e, 12_000.0), None)
+    assert [r[3] for r in rows] == ["met", "met", "NOT met"]  # 8.8x, 12,000, 0.88
+    assert rows[0][1] == "8.80" and rows[2][1] == "0.88"
+    rows = summary.targets(scaling_json("cpu", e2e, 12_000.0), None)
+    assert {r[3] for r in rows} == {"not judged (CPU)"}
+
+
+def test_test_counts_read_pytests_junit_report(tmp_path: Path) -> None:
+    xml = tmp_path / "r.xml"
+    assert summary.test_counts(xml).startswith("no report")
+    xml.write_text(
+        '<testsuites><testsuite tests="9" failures="1" errors="0" skipped="5"/></testsuites>'
+    )
+    assert summary.test_counts(xml) == "passed 3, failed 1, skipped 5"
+
+
+def test_summary_says_what_is_missing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "mb256").mkdir()
+    e2e = {("ppo", 1): 300.0, ("asor", 1): 250.0}
+    (tmp_path / "mb256" / "scaling.json").write_text(json.dumps(scaling_json("cpu", e2e, 500.0)))
+    assert summary.main([str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "| scaling benchmark, minibatch 2048 | no result (see its log) |" in out
+    assert "| PPO+ASOR, 1 runner(s) (env steps/s) | e2e 250; learner 500 |" in out
+
+
+def test_gpu_check_script_parses() -> None:
+    subprocess.run(["bash", "-n", str(ROOT / "scripts/gpu_check.sh")], check=True)
+
+
+def test_cuda_without_a_gpu_is_refused_in_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    torch = pytest.importorskip("torch")
+    if torch.cuda.is_available():
+        pytest.skip("this machine has CUDA")
+    assert scaling.main(["--device", "cuda", "--out", "/nonexistent/never-written"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "scaling: --device 'cuda' is invalid here: torch sees no CUDA device; allowed cpu"
+    )
