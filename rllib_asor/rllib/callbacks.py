@@ -77,6 +77,14 @@ def drop_nan_learner_stats(result: dict[str, Any]) -> None:
         prune(learners)
 
 
+class DropNaNLearnerStatsCallback(RLlibCallback):
+    """`drop_nan_learner_stats` after every training iteration, for runs without ASOR (with
+    ASOR, `AsorMetricsCallback` does it)."""
+
+    def on_train_result(self, *, algorithm: Any = None, result: dict, **kwargs: Any) -> None:
+        drop_nan_learner_stats(result)
+
+
 class AsorMetricsCallback(RLlibCallback):
     """Adds `result["asor"]` after every training iteration (and drops the NaN leaves of
     `result["learners"]`, `drop_nan_learner_stats`)."""

@@ -9,7 +9,11 @@ from typing import Any
 
 from ray.rllib.utils.metrics.metrics_logger import MetricsLogger
 
-from rllib_asor.rllib.callbacks import AsorMetricsCallback, lift_asor_metrics
+from rllib_asor.rllib.callbacks import (
+    AsorMetricsCallback,
+    DropNaNLearnerStatsCallback,
+    lift_asor_metrics,
+)
 from tests.rllib import test_glue_behaviour as ppo
 from tests.rllib import test_soft_q_glue as sac
 
@@ -74,3 +78,13 @@ def test_ppo_asor_update_reports_no_nan_and_a_finite_critic_ev() -> None:
     for i in range(3):
         lifted = _no_nan(ppo.update(lrn, ppo.episodes(i), step=60 * (i + 1)))
     assert "critic_ev" in lifted and "archive_states" in lifted
+
+
+def test_a_plain_run_drops_rllibs_nan_learner_stats_too() -> None:
+    result = {"learners": {"default_policy": {"num_trainable_parameters": float("nan"),
+                                              "policy_loss": 0.5}},
+              "env_runners": {"episode_return_mean": float("nan")}}  # fmt: skip
+    DropNaNLearnerStatsCallback().on_train_result(result=result)
+    assert result["learners"] == {"default_policy": {"policy_loss": 0.5}}
+    # Outside `learners` nothing is touched: a stop criterion may name it.
+    assert math.isnan(result["env_runners"]["episode_return_mean"])
