@@ -106,6 +106,7 @@ def _prepare(exp: Any, args: argparse.Namespace) -> Any:
     from rllib_asor.cli import experiment
     from rllib_asor.evaluation.dynamics import DynamicsReturnsCallback
 
+    experiment.check_file(exp)  # as written, before --test/--stop replace anything
     experiment.apply_overrides(
         exp,
         test=args.test,

@@ -8,6 +8,7 @@ from typing import Any
 from rllib_asor.cli import grid, multi_agent
 from rllib_asor.cli.errors import UsageError, one_line, quiet
 from rllib_asor.cli.spec import Experiment
+from rllib_asor.cli.value_types import check_config_values
 from rllib_asor.registry.families import families_with_curriculum, family_of
 
 # Config keys that are not plain AlgorithmConfig attributes but that we apply ourselves.
@@ -111,6 +112,34 @@ def check_key(default_cfg: Any, key: str, exp: Experiment) -> None:
         )
 
 
+def check_n_step(exp: Experiment, default_cfg: Any) -> None:
+    """`n_step` (DQN, SAC and their kin) needs fragments at least that long: RLlib's own check
+    fails with "'int' object is not subscriptable" (its message indexes an int `n_step`)."""
+    if not hasattr(default_cfg, "n_step") or "n_step" not in exp.config:
+        return
+    for n_step in _candidates(exp.config["n_step"]):
+        for fragment in _candidates(exp.config.get("rollout_fragment_length", "auto")):
+            longest = n_step[-1] if isinstance(n_step, list | tuple) and n_step else n_step
+            if (
+                isinstance(fragment, int)
+                and isinstance(longest, int)
+                and not isinstance(fragment, bool)
+                and fragment < longest
+            ):
+                raise UsageError(
+                    f"n_step: {n_step!r} needs rollout_fragment_length >= {longest}, got "
+                    f"rollout_fragment_length: {fragment}; allowed: rollout_fragment_length: auto "
+                    f"or an integer >= {longest}, or n_step <= {fragment}",
+                    source=exp.source,
+                    key=f"{exp.name}.config.n_step",
+                )
+
+
+def _candidates(value: Any) -> list[Any]:
+    """A value's grid candidates, or the value alone."""
+    return list(value["grid_search"]) if grid.is_grid(value) else [value]
+
+
 def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = None) -> Any:
     """AlgorithmConfig for one grid point (default: first candidate of every grid)."""
     cls = algorithm_class(exp)
@@ -118,6 +147,8 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
         cfg = cls.get_default_config()
         for key in exp.config:
             check_key(cfg, key, exp)
+        check_config_values(exp, cfg, attr_name)
+        check_n_step(exp, cfg)
         values = grid.with_candidates(exp.config, choice)
         family = family_of(exp.env)
         if family is not None:

@@ -32,7 +32,7 @@ from rllib_asor.cli.spec import (
     load_file,
     parse_experiment,
 )
-from rllib_asor.cli.validate import validate, validate_asor, validate_env
+from rllib_asor.cli.validate import check_file, validate, validate_asor, validate_env
 
 __all__ = [
     "DEFAULT_NUM_TO_KEEP",
@@ -41,6 +41,7 @@ __all__ = [
     "algorithm_class",
     "apply_overrides",
     "build_algo_config",
+    "check_file",
     "check_offline_input",
     "checkpoint_kwargs",
     "from_flags",

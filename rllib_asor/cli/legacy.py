@@ -26,6 +26,12 @@ RENAMED_CONFIG_KEYS: dict[str, str] = {
     "learning_starts": "num_steps_sampled_before_learning_starts",
 }
 
+# Where one algorithm's own deprecation message sends an old key elsewhere (offline CQL trains
+# without sampling: RLlib's cql.py names min_train_timesteps_per_iteration).
+RENAMED_CONFIG_KEYS_BY_RUN: dict[str, dict[str, str]] = {
+    "CQL": {"timesteps_per_iteration": "min_train_timesteps_per_iteration"},
+}
+
 # Old top-level config keys that now live in `model_config` (config.rl_module(model_config=...)).
 MODEL_CONFIG_TOPLEVEL_KEYS = ("vf_share_layers",)
 
@@ -40,9 +46,10 @@ RENAMED_STOP_KEYS: dict[str, str] = {
     "evaluation/episode_reward_mean": "evaluation/env_runners/episode_return_mean",
     "evaluation/sampler_results/episode_reward_mean": "evaluation/env_runners/episode_return_mean",
     "timesteps_total": "num_env_steps_sampled_lifetime",
-    "agent_timesteps_total": "num_agent_steps_sampled_lifetime",
+    # the new stack counts agent steps per agent id; one agent's id is `default_agent`
+    "agent_timesteps_total": "env_runners/num_agent_steps_sampled_lifetime/default_agent",
     "num_env_steps_sampled": "num_env_steps_sampled_lifetime",
-    "num_agent_steps_sampled": "num_agent_steps_sampled_lifetime",
+    "num_agent_steps_sampled": "env_runners/num_agent_steps_sampled_lifetime/default_agent",
 }
 
 # Old experiment-level keys -> where they go now.
@@ -94,7 +101,7 @@ def flatten_observations_connector(env: Any = None, spaces: Any = None, device: 
 
 
 def translate_config(
-    config: dict[str, Any], source: str, prefix: str = ""
+    config: dict[str, Any], source: str, prefix: str = "", run: str | None = None
 ) -> tuple[dict[str, Any], list[str]]:
     """Return (new-stack config dict, warnings); raise UsageError for unsupported legacy values.
 
@@ -104,13 +111,21 @@ def translate_config(
     """
     out: dict[str, Any] = {}
     warnings: list[str] = []
-    model_config: dict[str, Any] = dict(config.get("model_config") or {})
+    given = config.get("model_config") or {}
+    if not isinstance(given, dict):
+        raise UsageError(
+            f"{given!r} is invalid: allowed a mapping of model settings",
+            source=source,
+            key=f"{prefix}model_config",
+        )
+    model_config: dict[str, Any] = dict(given)
     into = retired.Into(out, model_config, source, prefix, warnings)
     for key, value in config.items():
         if key == "model_config" or retired.translate(key, value, into):
             continue
-        if key in RENAMED_CONFIG_KEYS:
-            new = RENAMED_CONFIG_KEYS[key]
+        renamed = {**RENAMED_CONFIG_KEYS, **RENAMED_CONFIG_KEYS_BY_RUN.get(str(run), {})}
+        if key in renamed:
+            new = renamed[key]
             warnings.append(f"{source}: legacy key '{key}' translated to '{new}'")
             out[new] = value
         elif key == "model":

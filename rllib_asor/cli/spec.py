@@ -130,7 +130,7 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
         asor = _mapping(asor, source, f"{name}.config.asor")
     maple = config.pop("maple", None)
     escp = config.pop("escp", None)
-    config, more = legacy.translate_config(config, source, f"{name}.config.")
+    config, more = legacy.translate_config(config, source, f"{name}.config.", spec.get("run"))
     warns += more
     if maple is not None:  # MAPLE/MOPO's own block: the MapleConfig attribute `maple_settings`
         config[MAPLE_KEY] = _mapping(maple, source, f"{name}.config.maple")

@@ -115,6 +115,7 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
     exps = load_experiments(args)
     configs = []
     for exp in exps:
+        experiment.check_file(exp)  # as written, before --test/--stop replace anything
         experiment.apply_overrides(
             exp,
             test=args.test,

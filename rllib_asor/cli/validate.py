@@ -10,6 +10,7 @@ from rllib_asor.cli.errors import UsageError, one_line, quiet
 from rllib_asor.cli.offline_inputs import check_offline_input
 from rllib_asor.cli.overrides import checkpoint_kwargs
 from rllib_asor.cli.spec import MAPLE_KEY, Experiment
+from rllib_asor.cli.stop_keys import check_stop
 
 
 def _check_grids(exp: Experiment) -> None:
@@ -161,16 +162,21 @@ def _flatten_for_the_default_module(exp: Experiment, space: Any) -> None:
     )
 
 
-def validate(exp: Experiment) -> Any:
-    """Check everything that can be checked before Ray starts; return the first-point config."""
-    check_offline_input(exp)
+def check_file(exp: Experiment) -> None:
+    """The file's own `config:` and `stop:` as written, before `--test`, `--stop` or
+    `--num-env-runners` replace any of them: what the real run would refuse is refused here
+    too. Leaves `exp` as it was, but for numbers written as text (read as numbers)."""
     _check_grids(exp)
-    _check_checkpoint_config(exp)
     algorithm_class(exp)
     validate_asor(exp)
     validate_escp(exp)
     validate_maple(exp)
-    validate_env(exp)
+    _check_config_points(exp)
+
+
+def _check_config_points(exp: Experiment) -> Any:
+    """Build and validate the AlgorithmConfig of every grid point and check the stop keys;
+    the first point's config."""
     cfg = None
     points: list[dict[grid.Path, Any]] = [{}]
     for path, candidates in grid.find_grids(exp.config):
@@ -183,6 +189,21 @@ def validate(exp: Experiment) -> Any:
             except Exception as e:
                 raise UsageError(one_line(e), source=exp.source, key=f"{exp.name}.config") from None
         cfg = cfg or candidate
+    check_stop(exp, cfg)
+    return cfg
+
+
+def validate(exp: Experiment) -> Any:
+    """Check everything that can be checked before Ray starts; return the first-point config."""
+    check_offline_input(exp)
+    _check_grids(exp)
+    _check_checkpoint_config(exp)
+    algorithm_class(exp)
+    validate_asor(exp)
+    validate_escp(exp)
+    validate_maple(exp)
+    validate_env(exp)
+    cfg = _check_config_points(exp)
     _check_env_runner(exp, cfg)
     return cfg
 

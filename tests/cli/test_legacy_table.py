@@ -66,7 +66,8 @@ def _result_keys() -> set[str]:
     episode = (M.EPISODE_RETURN_MEAN, M.EPISODE_RETURN_MAX, M.EPISODE_RETURN_MIN, M.EPISODE_LEN_MEAN)
     keys = {f"{M.ENV_RUNNER_RESULTS}/{k}" for k in episode}
     keys |= {f"{M.EVALUATION_RESULTS}/{M.ENV_RUNNER_RESULTS}/{k}" for k in episode}
-    keys |= {M.NUM_ENV_STEPS_SAMPLED_LIFETIME, M.NUM_AGENT_STEPS_SAMPLED_LIFETIME}
+    keys |= {M.NUM_ENV_STEPS_SAMPLED_LIFETIME}
+    keys |= {f"{M.ENV_RUNNER_RESULTS}/{M.NUM_AGENT_STEPS_SAMPLED_LIFETIME}/default_agent"}
     return keys
 
 

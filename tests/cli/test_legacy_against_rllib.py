@@ -1,0 +1,150 @@
+"""Each old key our legacy table translates, checked against what RLlib 2.60 itself says the
+old name became, not against our own table: its deprecation messages (`deprecation_warning(old=,
+new=|help=)` anywhere in `ray.rllib`, per algorithm where an algorithm's file says otherwise),
+`AlgorithmConfig._translate_special_keys`, the old-stack code that falls back from the new name
+to the old one, and the 2.60 setter signatures (the new name is a parameter of a setter). A wrong
+entry in the table fails here."""
+
+from __future__ import annotations
+
+import ast
+import functools
+import inspect
+import re
+from pathlib import Path
+
+import pytest
+import ray.rllib
+from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
+from ray.rllib.algorithms.cql import CQLConfig
+from ray.rllib.algorithms.dqn import DQNConfig
+from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.algorithms.sac import SACConfig
+from ray.rllib.utils.from_config import NotProvided
+
+from rllib_asor.cli import legacy
+
+RLLIB = Path(ray.rllib.__file__).parent
+WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def _text(node: ast.AST) -> str:
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return node.value
+    if isinstance(node, ast.JoinedStr):
+        return "".join(_text(v) for v in node.values)
+    if isinstance(node, ast.BinOp):
+        return _text(node.left) + _text(node.right)
+    return ""
+
+
+@functools.lru_cache(maxsize=1)
+def deprecations() -> list[tuple[str, str, str]]:
+    """(old text, new-or-help text, file) of every `deprecation_warning` call in ray.rllib."""
+    out = []
+    for path in RLLIB.rglob("*.py"):
+        if {"tests", "examples"} & set(path.parts):
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            func = getattr(node, "func", None)
+            name = getattr(func, "id", getattr(func, "attr", None))
+            if isinstance(node, ast.Call) and name == "deprecation_warning":
+                kw = {k.arg: _text(k.value) for k in node.keywords}
+                new = " ".join(filter(None, (kw.get("new"), kw.get("help"))))
+                if kw.get("old") and new:
+                    out.append((kw["old"], new, str(path.relative_to(RLLIB))))
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def fallbacks() -> set[tuple[str, str]]:
+    """(new, old) where old-stack code reads `config.get(new)` and, if None, `config.get(old)`."""
+    pattern = re.compile(
+        r'config\.get\("(?P<new>\w+)"\)\s*\n\s*if (?P<var>\w+) is None:\s*\n\s*(?P=var) = '
+        r'self\.config\.get\(\s*"(?P<old>\w+)"'
+    )
+    pairs = set()
+    for path in (RLLIB / "policy").glob("*.py"):
+        for m in pattern.finditer(path.read_text(encoding="utf-8")):
+            pairs.add((m["new"], m["old"]))
+    return pairs
+
+
+def rllib_says(old: str, run: str | None = None) -> set[str]:
+    """Every name RLlib says `old` became (for `run`'s own files, only what they say when
+    they say anything)."""
+    own, common = set(), set()
+    for old_text, new_text, file in deprecations():
+        if old in WORD.findall(old_text):
+            names = set(WORD.findall(new_text))
+            parts = file.split("/")
+            folder = parts[1] if len(parts) > 2 and parts[0] == "algorithms" else ""
+            if run is not None and folder == run.lower():
+                own |= names
+            else:
+                common |= names
+    translated = AlgorithmConfig._translate_special_keys(old, warn_deprecated=False)
+    if translated != old:
+        common.add(translated)
+    common |= {new for new, fallback_old in fallbacks() if fallback_old == old}
+    return own or common
+
+
+@functools.lru_cache(maxsize=1)
+def setter_parameters() -> set[str]:
+    """The parameters (default NotProvided) of every public setter of 2.60's configs."""
+    names = set()
+    for cls in (AlgorithmConfig, PPOConfig, SACConfig, DQNConfig, CQLConfig):
+        for name, fn in vars(cls).items():
+            if not name.startswith("_") and inspect.isfunction(fn):
+                for p in inspect.signature(fn).parameters.values():
+                    if p.default is NotProvided:
+                        names.add(p.name)
+    return names
+
+
+@pytest.mark.parametrize("old, new", sorted(legacy.RENAMED_CONFIG_KEYS.items()))
+def test_rllib_says_the_old_key_became_ours(old, new):
+    said = rllib_says(old)
+    assert said, f"RLlib 2.60 says nothing about {old!r}: no evidence for {old} -> {new}"
+    assert new in said, f"{old} -> {new}, but RLlib says {old} became one of {sorted(said)}"
+    assert new in setter_parameters(), f"{new} is no setter parameter of RLlib 2.60"
+
+
+@pytest.mark.parametrize(
+    "run, old, new",
+    sorted((run, old, new) for run, t in legacy.RENAMED_CONFIG_KEYS_BY_RUN.items()
+           for old, new in t.items()),  # fmt: skip
+)
+def test_an_algorithms_own_deprecation_message_wins(run, old, new):
+    assert new in rllib_says(old, run) and new in setter_parameters()
+    out, _ = legacy.translate_config({old: 5}, "f.yaml", run=run)
+    assert out == {new: 5}
+
+
+@pytest.mark.parametrize("run", ["CQL", "SAC", "PPO", "DQN"])
+def test_every_table_translation_agrees_with_the_algorithms_own_files(run):
+    """Where an algorithm's own file names a different new key than the common one, the
+    translation for that run follows the algorithm's file."""
+    for old in {*legacy.RENAMED_CONFIG_KEYS, *legacy.RENAMED_CONFIG_KEYS_BY_RUN.get(run, {})}:
+        out, _ = legacy.translate_config({old: 5}, "f.yaml", run=run)
+        (new,) = out
+        assert new in rllib_says(old, run), (run, old, new, rllib_says(old, run))
+
+
+@pytest.mark.parametrize(
+    "old, wrong",
+    [("min_iter_time_s", "min_train_timesteps_per_iteration"),
+     ("evaluation_num_workers", "num_env_runners"),
+     ("sgd_minibatch_size", "train_batch_size"),
+     ("num_cpus_for_driver", "num_cpus_per_learner")],
+)  # fmt: skip
+def test_a_wrong_entry_fails(monkeypatch, old, wrong):
+    """The check is not the table reading itself: a plausible but wrong target fails it."""
+    monkeypatch.setitem(legacy.RENAMED_CONFIG_KEYS, old, wrong)
+    with pytest.raises(AssertionError):
+        test_rllib_says_the_old_key_became_ours(old, legacy.RENAMED_CONFIG_KEYS[old])
+    monkeypatch.setitem(legacy.RENAMED_CONFIG_KEYS, "no_such_old_key", "lr")
+    with pytest.raises(AssertionError, match="says nothing"):
+        test_rllib_says_the_old_key_became_ours("no_such_old_key", "lr")
