@@ -18,10 +18,9 @@ from pathlib import Path
 from typing import Any
 
 from rllib_asor.cli.errors import UsageError
+from rllib_asor.cli.evaluate import EVAL_SEED  # the env seed of the final evaluation
 
 DEFAULT_STORAGE = "~/ray_results"
-EVAL_SEED = 1_000_000
-"""Env seed of the final evaluation: the same episodes for every checkpoint, unlike training's."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
