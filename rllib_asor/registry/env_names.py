@@ -7,9 +7,12 @@
   example envs also under their old module paths, `ray.rllib.examples.env.*`);
 - an old version of a gymnasium id (`Pendulum-v0`, `Hopper-v1`, `HalfCheetah-v3`) → the newest
   version that runs here;
-- an id registered by a module of the user's on `PYTHONPATH` (or in the working directory)
-  that this process has not imported yet: the module whose source names the id is imported;
 - an id the calling script registered with `gym.register` (its spec travels to the workers).
+
+Modules resolve as Python resolves them from where the user runs: the current folder is
+importable (as with `python -m`), then `PYTHONPATH`. No module is imported unless the name
+names it: an id that only a module of the user's registers must be given as `module:EnvId`
+(the unknown-id message says so, naming the module whose text mentions the id).
 
 `build_env(ref, env_config)` makes the env in any process (driver or env runner): it imports the
 module first, so a Tune creator holding the `EnvRef` works on every node that can import it.
@@ -34,7 +37,7 @@ from rllib_asor.registry import envs
 # Old module path prefix -> where RLlib moved it (Ray 2.10: examples/env -> examples/envs/classes).
 MOVED_ENV_MODULES = {"ray.rllib.examples.env.": "ray.rllib.examples.envs.classes."}
 _VERSIONED = re.compile(r"^(?P<base>.+)-v(?P<version>\d+)$")
-_SCAN_LIMIT = 500  # .py files looked at per PYTHONPATH folder
+_SCAN_LIMIT = 500  # .py files read (never imported) per folder for the unknown-id hint
 
 
 @dataclass(frozen=True)
@@ -65,6 +68,7 @@ def resolve_env(name: str) -> EnvRef:
         raise ValueError(f"env {name!r} is invalid: allowed an env id or 'package.module:Class'")
     if name in _REGISTERED:
         return _REGISTERED[name]
+    importable_cwd()
     if envs.env_exists(name):
         if name not in gym.registry and name not in envs.race_creators():
             return EnvRef(name, tune=True)  # someone else's Tune creator
@@ -78,10 +82,15 @@ def resolve_env(name: str) -> EnvRef:
     if "." in name and not _VERSIONED.match(name):
         module, _, attr = name.rpartition(".")
         return _from_module(name, module, attr)
-    module = _registering_module(name)
-    if module is not None:
-        return EnvRef(name, env_id=name, module=module)
     raise ValueError(_unknown_id(name))
+
+
+def importable_cwd() -> None:
+    """Make the current folder importable, as `python -m` does (first on `sys.path`); an
+    env's module or entry point next to the user's YAML file then imports. Imports nothing."""
+    cwd = os.getcwd()
+    if cwd not in sys.path:
+        sys.path.insert(0, cwd)
 
 
 def _known(name: str, spec: Any) -> EnvRef:
@@ -154,47 +163,57 @@ def _import(name: str, module: str) -> str:
             return candidate
         except ImportError as e:
             error = error or e
+        except Exception as e:  # the module itself fails: say so, in one line
+            raise ValueError(
+                f"env {name!r}: importing module {candidate!r} failed: "
+                f"{type(e).__name__}: {' '.join(str(e).split())}"
+            ) from None
     path = os.environ.get("PYTHONPATH", "")
     raise ValueError(
-        f"env {name!r}: module {module!r} cannot be imported ({error}); put it on PYTHONPATH "
-        f"(now {path!r}) or run from its folder"
+        f"env {name!r}: module {module!r} cannot be imported ({error}); looked in the current "
+        f"folder {os.getcwd()!r} and on PYTHONPATH (now {path!r}): run from the module's folder "
+        "or put that folder on PYTHONPATH"
     )
 
 
-def _registering_module(env_id: str) -> str | None:
-    """A top-level module in the working directory or on PYTHONPATH whose source names
-    `env_id` and whose import registers it; None if there is none."""
-    import gymnasium as gym
-
+def _mentioning_modules(env_id: str) -> list[str]:
+    """Top-level modules in the current folder or on PYTHONPATH whose text names `env_id`
+    (read, never imported): the hint of the unknown-id message."""
     folders = [os.getcwd(), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
     quoted = (f'"{env_id}"', f"'{env_id}'")
+    found: list[str] = []
     for folder in dict.fromkeys(folders):
         for path in sorted(Path(folder).glob("*.py"))[:_SCAN_LIMIT]:
             try:
                 text = path.read_text(encoding="utf-8", errors="ignore")
             except OSError:
                 continue
-            if not any(q in text for q in quoted):
-                continue
-            if folder not in sys.path:
-                sys.path.insert(0, folder)
-            try:
-                importlib.import_module(path.stem)
-            except Exception:  # not the user's env module after all; keep looking
-                continue
-            if env_id in gym.registry:
-                return path.stem
-    return None
+            if any(q in text for q in quoted) and path.stem not in found:
+                found.append(path.stem)
+    return found
 
 
 def _unknown_id(name: str) -> str:
+    """One line: the close ids, how to name a module of one's own (with this id), and where
+    modules are looked for."""
     import gymnasium as gym
 
-    close = difflib.get_close_matches(name, list(gym.registry), n=3, cutoff=0.6)
-    hint = f"did you mean {' or '.join(close)}? " if close else ""
+    ids = [*gym.registry, *envs.race_creators()]
+    close = difflib.get_close_matches(name, ids, n=3, cutoff=0.6)
+    hint = f"close ids: {', '.join(close)}; " if close else ""
+    mentioning = _mentioning_modules(name)
+    module = mentioning[0] if mentioning else "mymodule"
+    named = (
+        f"did you mean '{module}:{name}'? ({module}.py names this id; a module is imported only "
+        "when the name names it); "
+        if mentioning
+        else ""
+    )
     return (
-        f"unknown env id {name!r}; {hint}allowed: {envs.known_ids()}, 'module:EnvId' "
-        "(gymnasium), or an env class 'package.module:Class' on PYTHONPATH"
+        f"unknown env id {name!r}; {named}{hint}allowed: a registered id ({envs.known_ids()}), "
+        f"or a name that names its module: '{module}:{name}' (the module registers the id), "
+        f"'{module}:MyEnv' or '{module}.MyEnv' (an env class or creator); modules are found "
+        "in the current folder and on PYTHONPATH"
     )
 
 

@@ -1,6 +1,7 @@
 """A user's own env, in their own module outside the package, named every way people name envs:
 `rllib train file --test` trains it, `rllib evaluate` evaluates it, and a Python script with
-RLlib's PPOConfig + `with_asor` trains it after a plain `gym.register`."""
+RLlib's PPOConfig + `with_asor` trains it after a plain `gym.register`. A bare id that only the
+module registers is refused with the `module:Id` to write (an unnamed module is not imported)."""
 
 from __future__ import annotations
 
@@ -69,8 +70,7 @@ def _rllib(args: list[str], user_env: dict, cwd: Path, timeout: int = 300):
 
 
 @pytest.mark.parametrize(
-    "env_name",
-    ["MyVarPole-v0", "myenv:MyVarPole-v0", "myenv.VarPoleCartPole", "myenv:VarPoleCartPole"],
+    "env_name", ["myenv:MyVarPole-v0", "myenv.VarPoleCartPole", "myenv:VarPoleCartPole"]
 )
 def test_every_way_of_naming_the_env_validates(user, env_name):
     root, env = user
@@ -79,10 +79,10 @@ def test_every_way_of_naming_the_env_validates(user, env_name):
     assert f"env: {env_name}" in proc.stdout
 
 
-def test_own_env_by_plain_id_trains_with_test_and_is_evaluated(user):
+def test_own_env_by_module_and_id_trains_with_test_and_is_evaluated(user):
     root, env = user
     results = root / "results"
-    proc = _rllib(["train", "file", str(_yaml(root, "MyVarPole-v0")), "--test",
+    proc = _rllib(["train", "file", str(_yaml(root, "myenv:MyVarPole-v0")), "--test",
                    "--storage-path", str(results)], env, root / "work")
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     assert "1 trial(s), 0 errored" in proc.stdout
@@ -130,7 +130,8 @@ def test_python_script_registers_its_env_and_trains_with_asor(user):
 @pytest.mark.parametrize(
     ("env_name", "fragments"),
     [
-        ("CartPole-v9", ("unknown env id 'CartPole-v9'", "did you mean CartPole-v")),
+        ("CartPole-v9", ("unknown env id 'CartPole-v9'", "close ids: CartPole-v")),
+        ("MyVarPole-v0", ("unknown env id 'MyVarPole-v0'", "did you mean 'myenv:MyVarPole-v0'")),
         ("nosuchmodule.Env", ("module 'nosuchmodule' cannot be imported", "PYTHONPATH")),
         ("myenv:NoSuchThing", ("module 'myenv' has no env class",)),
     ],

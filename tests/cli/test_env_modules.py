@@ -1,0 +1,142 @@
+"""Env names resolve as Python resolves modules from where the user runs: the current folder is
+importable for every form (`module:Id`, `module:Class`, `module.Class`) in `rllib train`,
+`rllib ab` and `rllib evaluate`, and no file is imported unless the name names its module: a
+file that mentions the id and has an import side effect stays unimported by every command."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+RLLIB = str(Path(sys.executable).with_name("rllib"))
+
+MYENVS = '''
+import gymnasium as gym
+import numpy as np
+
+
+class PointReach(gym.Env):
+    """A point mass pushed towards the origin; its mass changes per episode."""
+
+    def __init__(self, config=None):
+        self.observation_space = gym.spaces.Box(-10.0, 10.0, (2,), np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.mass = float(self.np_random.choice([0.5, 1.0, 2.0]))
+        self.pos = self.np_random.uniform(-1, 1, 2).astype(np.float32)
+        self.t = 0
+        return self.pos.copy(), {"dynamics_id": self.mass}
+
+    def step(self, action):
+        self.pos = np.clip(self.pos + np.asarray(action, np.float32) / self.mass, -10, 10)
+        self.t += 1
+        reward = -float(np.linalg.norm(self.pos))
+        return self.pos.copy(), reward, False, self.t >= 20, {"dynamics_id": self.mass}
+
+
+gym.register("MyPointReach-v0", entry_point="myenvs:PointReach")
+'''
+
+SIDE_EFFECT = '''
+# A training script without a __main__ guard that names the env id.
+import pathlib
+pathlib.Path(__file__).with_name("IMPORTED").write_text("imported")
+ENV = "MyPointReach-v0"
+'''
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """The user's folder: their env module, a script with an import side effect that names
+    the id, and an environment without PYTHONPATH (only the current folder can help)."""
+    root = tmp_path_factory.mktemp("point")
+    (root / "myenvs.py").write_text(MYENVS)
+    (root / "train_point.py").write_text(SIDE_EFFECT)
+    (root / "elsewhere").mkdir()
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env["RAY_memory_monitor_refresh_ms"] = "0"
+    return root, env
+
+
+def _yaml(root: Path, env_name: str, config: str = "") -> str:
+    path = root / f"exp-{abs(hash((env_name, config)))}.yaml"
+    path.write_text(
+        f"point:\n  env: {env_name}\n  run: PPO\n  stop: {{training_iteration: 1}}\n"
+        f"  config: {{train_batch_size: 128, minibatch_size: 64, num_epochs: 1{config}}}\n"
+    )
+    return str(path)
+
+
+def _rllib(args: list[str], env: dict, cwd: Path, timeout: int = 400):
+    return subprocess.run(
+        [RLLIB, *args], capture_output=True, text=True, timeout=timeout, env=env, cwd=cwd
+    )
+
+
+def _one_line(proc, *fragments: str) -> str:
+    assert proc.returncode == 2, (proc.stdout + proc.stderr)[-2000:]
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+    return lines[0]
+
+
+def _not_imported(root: Path) -> None:
+    assert not (root / "IMPORTED").exists(), "a file the user did not name was imported"
+
+
+@pytest.mark.parametrize("env_name", ["myenvs:MyPointReach-v0", "myenvs:PointReach",
+                                      "myenvs.PointReach"])  # fmt: skip
+def test_every_form_naming_the_module_resolves_from_its_folder(folder, env_name):
+    root, env = folder
+    proc = _rllib(["train", "file", _yaml(root, env_name), "--dry-run"], env, root)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert f"env: {env_name}" in proc.stdout
+    _not_imported(root)
+
+
+def test_a_bare_id_imports_nothing_and_says_how_to_name_the_module(folder):
+    root, env = folder
+    proc = _rllib(["train", "file", _yaml(root, "MyPointReach-v0"), "--dry-run"], env, root)
+    _one_line(proc, "unknown env id 'MyPointReach-v0'", "did you mean 'myenvs:MyPointReach-v0'",
+              "'mymodule:MyPointReach-v0'".replace("mymodule", "myenvs"),
+              "current folder and on PYTHONPATH")  # fmt: skip
+    _not_imported(root)
+    close = _rllib(["train", "file", _yaml(root, "MyPointReach-v1"), "--dry-run"], env, root)
+    _one_line(close, "unknown env id 'MyPointReach-v1'", "'mymodule:MyPointReach-v1'")
+    _not_imported(root)
+
+
+def test_ab_resolves_the_module_from_its_folder_only(folder):
+    """`rllib ab` reaches the env build (the module imported from the current folder) with an
+    env_config the env refuses; from another folder it says where it looked."""
+    root, env = folder
+    path = _yaml(root, "myenvs:MyPointReach-v0", ", env_config: {mass: 3}, asor: {seed: 0}")
+    here = _rllib(["ab", path, "--seeds", "2", "--test"], env, root)
+    _one_line(here, "cannot be built with {'mass': 3}")
+    plain = _yaml(root, "myenvs:MyPointReach-v0", ", asor: {seed: 0}")
+    there = _rllib(["ab", plain, "--seeds", "2", "--test"], env, root / "elsewhere")
+    _one_line(there, "module 'myenvs' cannot be imported", "run from the module's folder")
+    _not_imported(root)
+
+
+def test_train_and_evaluate_from_the_modules_folder(folder):
+    root, env = folder
+    results = root / "results"
+    proc = _rllib(["train", "file", _yaml(root, "myenvs:MyPointReach-v0"), "--test",
+                   "--storage-path", str(results)], env, root)  # fmt: skip
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert "1 trial(s), 0 errored" in proc.stdout
+    ev = _rllib(["evaluate", str(results / "point"), "--episodes", "2"], env, root)
+    assert ev.returncode == 0, (ev.stdout + ev.stderr)[-3000:]
+    assert "Traceback" not in ev.stderr and "episodes: 2" in ev.stdout
+    away = _rllib(["evaluate", str(results / "point"), "--episodes", "2"], env, root / "elsewhere")
+    _one_line(away, "module 'myenvs' cannot be imported", "run from the module's folder")
+    _not_imported(root)
