@@ -38,7 +38,7 @@ smoke: $(STAMP)
 	$(VENV)/bin/rllib quickstart --test
 
 test: $(STAMP)
-	$(PY) -m pytest -q --timeout=900
+	$(PY) -m pytest -q --timeout=900 --durations=30
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks studies

@@ -71,22 +71,38 @@ def _pieces(batch: dict) -> dict[str, torch.Tensor]:
     return out | {"rewards": batch[DEFAULT_MODULE_ID][Columns.REWARDS].clone()}
 
 
-def _rank(rank: int, store: str, out: str, settings: dict) -> None:
+def _ppo_pieces(rank: int, settings: dict) -> dict:
+    lrn = learner(**settings)
+    pieces = {}
+    for call, seeds in CALLS.items():  # ASOR's state carries over from call to call
+        pieces[call] = _pieces(module_batch(lrn, episodes(seeds[rank])))
+    return pieces
+
+
+def _all_cases(rank: int, store: str, out: str) -> None:
+    """Every two-Learner case of this module, one after the other in the same gloo group
+    (each builds its own Learners): spawning the pair and importing torch and RLlib in it
+    costs more than the cases themselves."""
     join_group(rank, store)
     try:
-        lrn = learner(**settings)
-        pieces = {}
-        for call, seeds in CALLS.items():  # ASOR's state carries over from call to call
-            pieces[call] = _pieces(module_batch(lrn, episodes(seeds[rank])))
-        torch.save(pieces, Path(out) / f"{rank}.pt")
+        cases = {name: _ppo_pieces(rank, settings) for name, settings in SETTINGS.items()}
+        cases["multi_agent"] = _ma_pieces_of_rank(rank)
+        cases["maple"] = _maple_pieces_of_rank(rank)
+        torch.save(cases, Path(out) / f"{rank}.pt")
     finally:
         dist.destroy_process_group()
 
 
+@pytest.fixture(scope="module")
+def two_ranks(tmp_path_factory) -> list[dict]:
+    """What each rank of one two-process group computed, by case (see `_all_cases`)."""
+    return run_two_ranks(_all_cases, tmp_path_factory.mktemp("two_ranks"))
+
+
 @pytest.mark.parametrize("name", sorted(SETTINGS))
-def test_two_learners_get_what_one_learner_computes_on_both_batches(name, tmp_path):
+def test_two_learners_get_what_one_learner_computes_on_both_batches(name, two_ranks):
     settings = SETTINGS[name]
-    ranks = run_two_ranks(_rank, tmp_path, settings)
+    ranks = [r[name] for r in two_ranks]
 
     one = learner(**settings)
     for call, seeds in CALLS.items():
@@ -119,21 +135,16 @@ def _ma_pieces(batch: dict, policy: str) -> dict[str, torch.Tensor]:
 MA_AGENTS = (("a0", "a1"), ("a0",))  # rank 1 has no rows of policy "p1"
 
 
-def _ma_rank(rank: int, store: str, out: str) -> None:
-    join_group(rank, store)
-    try:
-        batch = module_batch(ma_learner(), ma_episodes(rank, MA_AGENTS[rank]))
-        pieces = {p: _ma_pieces(batch, p) for p in ("p0", "p1")}
-        torch.save(pieces, Path(out) / f"{rank}.pt")
-    finally:
-        dist.destroy_process_group()
+def _ma_pieces_of_rank(rank: int) -> dict:
+    batch = module_batch(ma_learner(), ma_episodes(rank, MA_AGENTS[rank]))
+    return {p: _ma_pieces(batch, p) for p in ("p0", "p1")}
 
 
-def test_a_learner_without_rows_of_a_policy_still_takes_part_in_its_update(tmp_path):
+def test_a_learner_without_rows_of_a_policy_still_takes_part_in_its_update(two_ranks):
     """Multi-agent on two Learners: a policy whose agents acted only in rank 0's episodes still
     gets ASOR's update on every rank (it is collective), with rank 0's rows ranked as one
     Learner ranks them and an equal share of the discriminator's batch on each rank."""
-    ranks = run_two_ranks(_ma_rank, tmp_path)
+    ranks = [r["multi_agent"] for r in two_ranks]
     whole = module_batch(ma_learner(), ma_episodes(0, MA_AGENTS[0]) + ma_episodes(1, MA_AGENTS[1]))
     for policy in ("p0", "p1"):
         one = _ma_pieces(whole, policy)
@@ -175,24 +186,20 @@ def _maple_pieces(learner, batch) -> dict[str, torch.Tensor]:
     return got
 
 
-def _maple_rank(rank: int, store: str, out: str) -> None:
+def _maple_pieces_of_rank(rank: int) -> dict:
     from tests.rllib.test_soft_q_glue import maple_batch, maple_learner
 
-    join_group(rank, store)
-    try:
-        lrn = maple_learner(preset="paper", lambda_=0.1)
-        torch.save(_maple_pieces(lrn, maple_batch(lrn, seed=rank)[1]), Path(out) / f"{rank}.pt")
-    finally:
-        dist.destroy_process_group()
+    lrn = maple_learner(preset="paper", lambda_=0.1)
+    return _maple_pieces(lrn, maple_batch(lrn, seed=rank)[1])
 
 
-def test_two_maple_learners_rank_all_real_states_and_keep_their_own_bonus(tmp_path):
+def test_two_maple_learners_rank_all_real_states_and_keep_their_own_bonus(two_ranks):
     import numpy as np
     from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 
     from tests.rllib.test_soft_q_glue import maple_batch, maple_learner
 
-    ranks = run_two_ranks(_maple_rank, tmp_path)
+    ranks = [r["maple"] for r in two_ranks]
 
     one = maple_learner(preset="paper", lambda_=0.1)
     cols = [maple_batch(one, seed=r)[0] for r in (0, 1)]
