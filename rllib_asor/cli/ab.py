@@ -105,7 +105,7 @@ def _prepare(exp: Any, args: argparse.Namespace) -> Any:
     from rllib_asor.cli import experiment
     from rllib_asor.evaluation.dynamics import DynamicsReturnsCallback
 
-    experiment.check_file(exp)  # as written, before --test/--stop replace anything
+    experiment.check_file(exp, evaluation=True)  # as written, before --test/--stop replace it
     experiment.apply_overrides(
         exp,
         test=args.test,

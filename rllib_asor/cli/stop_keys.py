@@ -331,13 +331,15 @@ def did_you_mean(key: str, candidates: list[str]) -> str:
     )
 
 
-def check_stop(exp: Any, cfg: Any, where: str = "stop") -> None:
+def check_stop(exp: Any, cfg: Any, evaluation: bool = False) -> None:
     """UsageError (one line, did-you-mean) for the first stop key `cfg`'s algorithm does not
     report; a file with callbacks of its own may name the metrics they log (a warning unless
-    the key is a near miss of a known one)."""
+    the key is a near miss of a known one). `evaluation`: evaluation runs whatever the config
+    says (`rllib ab` turns it on)."""
     if not exp.stop:
         return
     catalogue = Catalogue(exp, cfg)
+    catalogue.evaluation = catalogue.evaluation or evaluation
     for key in exp.stop:
         if not isinstance(key, str) or catalogue.knows(key):
             continue
@@ -348,4 +350,4 @@ def check_stop(exp: Any, cfg: Any, where: str = "stop") -> None:
                 "the run only if your callbacks log it"
             )
             continue
-        raise UsageError(catalogue.why_not(key), source=exp.source, key=f"{exp.name}.{where}.{key}")
+        raise UsageError(catalogue.why_not(key), source=exp.source, key=f"{exp.name}.stop.{key}")

@@ -162,19 +162,20 @@ def _flatten_for_the_default_module(exp: Experiment, space: Any) -> None:
     )
 
 
-def check_file(exp: Experiment) -> None:
+def check_file(exp: Experiment, evaluation: bool = False) -> None:
     """The file's own `config:` and `stop:` as written, before `--test`, `--stop` or
     `--num-env-runners` replace any of them: what the real run would refuse is refused here
-    too. Leaves `exp` as it was, but for numbers written as text (read as numbers)."""
+    too. Leaves `exp` as it was, but for numbers written as text (read as numbers).
+    `evaluation`: the caller turns evaluation on (`evaluation/...` stop keys are reported)."""
     _check_grids(exp)
     algorithm_class(exp)
     validate_asor(exp)
     validate_escp(exp)
     validate_maple(exp)
-    _check_config_points(exp)
+    _check_config_points(exp, evaluation)
 
 
-def _check_config_points(exp: Experiment) -> Any:
+def _check_config_points(exp: Experiment, evaluation: bool = False) -> Any:
     """Build and validate the AlgorithmConfig of every grid point and check the stop keys;
     the first point's config."""
     cfg = None
@@ -189,7 +190,7 @@ def _check_config_points(exp: Experiment) -> Any:
             except Exception as e:
                 raise UsageError(one_line(e), source=exp.source, key=f"{exp.name}.config") from None
         cfg = cfg or candidate
-    check_stop(exp, cfg)
+    check_stop(exp, cfg, evaluation)
     return cfg
 
 

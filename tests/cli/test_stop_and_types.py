@@ -180,3 +180,14 @@ def test_the_catalogue_covers_every_metric_of_a_real_iteration(cli_ray):
         reported[run] = numbers
     for old, new in legacy.RENAMED_STOP_KEYS.items():
         assert new in reported["PPO"], (old, new)
+
+
+def test_rllib_ab_turns_evaluation_on_so_its_stop_keys_pass():
+    from rllib_asor.cli.errors import UsageError
+    from rllib_asor.cli.validate import check_file
+
+    spec = {"run": "PPO", "env": "CartPole-v1",
+            "stop": {"evaluation/env_runners/episode_return_mean": 100}}  # fmt: skip
+    check_file(parse_experiment("x", spec, "f.yaml"), evaluation=True)  # what `rllib ab` does
+    with pytest.raises(UsageError, match="evaluation_interval"):
+        check_file(parse_experiment("x", spec, "f.yaml"))
