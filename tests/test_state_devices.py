@@ -180,3 +180,48 @@ def test_maple_model_rollout_makes_its_tensors_on_the_ensemble_device() -> None:
         got = roll()
     for key, value in expected.items():
         np.testing.assert_array_equal(got[key], value, err_msg=key)
+
+
+def test_maple_asor_bonus_makes_its_tensors_on_the_device_of_its_data() -> None:
+    from rllib_asor.rllib.maple_asor import maple_asor_bonus
+    from tests.rllib.test_soft_q_glue import _maple_case
+
+    cfg = _cfg("robust default (archive, potential shaping)")
+    case = _maple_case()
+
+    def bonus(state: AsorState, proxy: nn.Module | None) -> torch.Tensor:
+        delta, _ = maple_asor_bonus(cfg, state, proxy, *case, np.random.default_rng(0))
+        return delta
+
+    expected = bonus(*_build(cfg))
+    state, proxy = _build(cfg)
+    with torch.device("meta"):
+        got = bonus(state, proxy)
+    assert got.device.type == "cpu" and torch.equal(got, expected)
+
+
+@pytest.mark.parametrize("algorithm", ["ppo", "sac"])
+def test_the_asor_connector_makes_its_tensors_on_the_device_of_the_batch(
+    ray_session, monkeypatch, algorithm: str
+) -> None:
+    """The ASOR piece of a real PPO and SAC Learner (the critic's values, the features, the
+    reward rewrite, the aux batches) under the wrong default device; RLlib's own code runs as
+    usual (it is not ours to check)."""
+    from rllib_asor.rllib.connector import AsorRewardConnector
+    from tests.test_gpu_training import lava, sac
+
+    piece = AsorRewardConnector.__call__
+
+    def on_the_wrong_default(self: AsorRewardConnector, **kwargs: object) -> object:
+        with torch.device("meta"):
+            return piece(self, **kwargs)
+
+    monkeypatch.setattr(AsorRewardConnector, "__call__", on_the_wrong_default)
+    config, iterations = (lava(True), 1) if algorithm == "ppo" else (sac(True), 3)
+    algo = config.build_algo()
+    try:
+        for _ in range(iterations):
+            result = algo.train()
+    finally:
+        algo.stop()
+    assert np.isfinite(result["asor"]["disc_loss"]) and np.isfinite(result["asor"]["lambda"])

@@ -48,8 +48,6 @@ DTYPES = frozenset(
 ALLOWED: dict[tuple[str, str, str], str] = {
     ("asor/archive.py", "discounted_return_to_go", "from_numpy"):
         "CPU numpy bridge for scipy's lfilter; the caller moves it with .to(archive buffer)",
-    ("asor/encoding.py", "flatten", "as_tensor"):
-        "wraps an existing tensor in place (device kept); numpy input is the caller's CPU data",
     ("algorithms/common/learner_speed.py", "IndexSelectShuffleBatch.shuffle", "from_numpy"):
         "one CPU permutation for numpy and torch columns; take_rows moves it per column",
 }

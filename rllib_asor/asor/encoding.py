@@ -59,7 +59,8 @@ def flatten(x: Any, space: gym.Space) -> torch.Tensor:
         return torch.cat([flatten(x[k], s) for k, s in space.spaces.items()], dim=-1)
     if isinstance(space, gym.spaces.Tuple):
         return torch.cat([flatten(xi, s) for xi, s in zip(x, space.spaces, strict=True)], dim=-1)
-    x = torch.as_tensor(x)
+    if not isinstance(x, torch.Tensor):  # numpy or lists: host data, made on the CPU
+        x = torch.as_tensor(x, device="cpu")
     if isinstance(space, gym.spaces.Discrete):
         return torch.nn.functional.one_hot(
             (x.long() - int(space.start)).reshape(-1), int(space.n)
