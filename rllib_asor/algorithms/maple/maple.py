@@ -410,7 +410,13 @@ class MAPLE(Algorithm):
         s = self._settings
         t0 = time.perf_counter()
         res = evaluate(module.nets, self._manifest, episodes=s.evaluation_episodes, seed=10_000)
-        flat = {f"{dyn}/{k}": v for dyn, stats in res.items() for k, v in stats.items()}
+        # Without the dataset's reference returns there is no normalized score: absent, not NaN.
+        flat = {
+            f"{dyn}/{k}": v
+            for dyn, stats in res.items()
+            for k, v in stats.items()
+            if np.isfinite(v)
+        }
         flat["seconds"] = time.perf_counter() - t0
         self.metrics.log_dict(flat, key="evaluation", window=1)
 
