@@ -100,7 +100,10 @@ def asor_health(history: Sequence[Mapping[str, Any]], window: int = WINDOW) -> I
             f"discriminator JS estimate below {CHANCE_JS:g} for {n} iterations (last {js[-1]:.2g})"
         )
         if weak:
-            cause += f"; the critic's explained variance is {ev[-1]:.2g}, so the split by value is near random"
+            cause += (
+                f"; the critic's explained variance is {ev[-1]:.2g}, so the split by value is "
+                "near random"
+            )
         advice = (
             "check the critic's explained variance, a longer warm-up (a lambda_ schedule "
             "that starts later), or observation keys that tell good states apart (obs_keys)"
