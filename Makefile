@@ -64,6 +64,12 @@ datasets: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m benchmarks.run_all
 
+# The GPU check (docs/cluster.md): the gpu-marked tests and the race scaling benchmark, one
+# table, at most ~8 min. Uses .venv if there is one, else python3 (the offline GPU kit).
+.PHONY: gpu-check
+gpu-check:
+	scripts/gpu_check.sh
+
 # Each study's page, docs/studies/<name>.md, generated from its run files (studies/lib/pages.py).
 .PHONY: results
 results: $(STAMP)

@@ -112,6 +112,10 @@ def main(argv: list[str] | None = None) -> int:
                 )
         for note in res.get("notes", []):
             lines.append(f"| note | {note} | | |")
+        if res.get("finished") is False:
+            lines.append(
+                f"| note | {name}: stopped by its time limit; what it measured is above | | |"
+            )
     for check, shown, target, verdict in targets(mb256, mb2048):
         lines.append(f"| {check} | {shown} | {target} | {verdict} |")
     print("\n".join(lines))

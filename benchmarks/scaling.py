@@ -118,6 +118,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--rounds", type=int, default=1, help="interleaved rounds over --trees")
     p.add_argument("--model-config", type=json.loads, default={}, help="race_net settings (JSON)")
+    p.add_argument(
+        "--drop-bootstrap-rows",
+        action="store_true",
+        help="PPO without its masked bootstrap rows (rllib_asor.algorithms.ppo.lean)",
+    )
     p.add_argument("--out", default="benchmarks/out/scaling")
     p.add_argument("--learner-job", default=None, help=argparse.SUPPRESS)  # internal: one tree
     return p
@@ -174,6 +179,10 @@ def race_config(algo: str, args: argparse.Namespace, runners: int, seed: int = 0
     )
     if args.device == "cuda":
         config = config.learners(num_gpus_per_learner=1)
+    if getattr(args, "drop_bootstrap_rows", False):
+        from rllib_asor.algorithms.ppo.lean import drop_bootstrap_rows
+
+        config = drop_bootstrap_rows(config)
     if algo == "asor":
         config = rllib_asor.with_asor(config, mode="asor", obs_keys=list(RACE_ASOR_OBS_KEYS))
     return config
@@ -223,14 +232,14 @@ def measure_learner(
     config = race_config(algo, args, runners)
     learner = _build_learner(config)
     cuda = args.device == "cuda"
-    lifetime, times, steps = 0, [], []
+    lifetime, times, cpu_times, steps = 0, [], [], []
     passes = 1 + args.learner_passes
     for p in range(passes):
         for b in range(len(recorded)):
             episodes = runner_batch(recorded, b, runners)
             n = sum(len(e) for e in episodes)
             lifetime += n
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             learner.update(
                 episodes=episodes,
                 timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: lifetime},
@@ -242,11 +251,15 @@ def measure_learner(
                 torch.cuda.synchronize()
             if p > 0:
                 times.append(time.perf_counter() - t0)
+                cpu_times.append(time.process_time() - c0)
                 steps.append(n)
     device = str(next(learner.module[next(iter(learner.module.keys()))].parameters()).device)
     minibatches = -(-args.epochs * args.rows_per_runner * runners // args.minibatch)
     return {
         "env_steps_per_s": sum(steps) / sum(times),
+        # Per second of this process's CPU time: on a CPU Learner with one torch thread, what
+        # other jobs on a shared machine change least (they take wall time, not its CPU time).
+        "env_steps_per_cpu_s": sum(steps) / sum(cpu_times),
         "update_s_median": statistics.median(times),
         "ms_per_minibatch": 1000 * sum(times) / len(times) / minibatches,
         "updates_timed": len(times),
@@ -367,13 +380,15 @@ def measure_algo(
 
 
 def measure_tune(algo: str, args: argparse.Namespace) -> float:
-    """`--trials` seeds of race PPO(+ASOR) at once under Tune, 1 runner each: the sum of their
-    env steps/s after their first iteration."""
+    """`--trials` seeds of race PPO(+ASOR) at once under Tune, 1 runner each (on a GPU, each
+    Learner gets 1/trials of it): the sum of their env steps/s after their first iteration."""
     from ray import tune
 
     from rllib_asor.rllib.trainable import asor_trainable
 
     base = race_config("ppo", args, 1)
+    if args.device == "cuda":  # the trials share the one GPU
+        base = base.learners(num_gpus_per_learner=1 / args.trials)
     space = base.to_dict() | {"seed": tune.grid_search(list(range(args.trials)))}
     if algo == "asor":
         from rllib_asor.race.config import RACE_ASOR_OBS_KEYS
@@ -403,8 +418,8 @@ def table(results: dict[str, Any]) -> str:
     """One markdown table: a row per algorithm and runner count."""
     lines = [
         "| algorithm | env runners | end to end (env steps/s) | sampling only | Learner alone "
-        "| ms per minibatch | Tune trials at once (sum) |",
-        "|---|---|---|---|---|---|---|",
+        "| Learner alone per CPU second | ms per minibatch | Tune trials at once (sum) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
 
     def cell(x: Any) -> str:
@@ -415,7 +430,7 @@ def table(results: dict[str, Any]) -> str:
         lines.append(
             f"| {LABELS[row['algo']]} | {row['runners']} | {cell(row.get('e2e'))} "
             f"| {cell(row.get('sample'))} | {cell(row.get('learner'))} "
-            f"| {'—' if ms is None else f'{ms:.1f}'} | {cell(row.get('tune'))} |"
+            f"| {cell(row.get('learner_per_cpu_s'))} | {'—' if ms is None else f'{ms:.1f}'} | {cell(row.get('tune'))} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -477,6 +492,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                 row.update(
                     {
                         "learner": res["env_steps_per_s"],
+                        "learner_per_cpu_s": res["env_steps_per_cpu_s"],
                         "ms_per_minibatch": res["ms_per_minibatch"],
                         "learner_device": res["learner_device"],
                     }
@@ -484,7 +500,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                 save()
                 print(
                     f"Learner alone {LABELS[algo]} r{n}: {res['env_steps_per_s']:.0f} env steps/s "
-                    f"on {res['learner_device']}",
+                    f"({res['env_steps_per_cpu_s']:.0f} per CPU second) on {res['learner_device']}",
                     flush=True,
                 )
     ray_parts = [p for p in args.part_list if p in ("sample", "e2e", "tune")]
@@ -548,8 +564,10 @@ def main(argv: list[str] | None = None) -> int:
     if "trees" in results:
         by: dict[tuple[str, str, int], list[float]] = {}
         for r in results["trees"]:
-            by.setdefault((r["tree"], r["algo"], r["runners"]), []).append(r["env_steps_per_s"])
-        print("| tree | algorithm | env runners | Learner alone env steps/s (median) | per round |")
+            by.setdefault((r["tree"], r["algo"], r["runners"]), []).append(r["env_steps_per_cpu_s"])
+        print(
+            "| tree | algorithm | env runners | Learner alone env steps per CPU second (median) | per round |"
+        )
         print("|---|---|---|---|---|")
         for (tree, algo, n), v in by.items():
             print(
