@@ -242,6 +242,8 @@ class Catalogue:
         self.evaluation = bool(getattr(cfg, "evaluation_interval", None))
         self.replay = getattr(cfg, "replay_buffer_config", None) is not None
         self.multi = bool(getattr(cfg, "is_multi_agent", False))
+        source = getattr(cfg, "input_", "sampler")
+        self.offline = bool(source) and source != "sampler"
         own = {"callbacks", "callbacks_class"} & set(exp.config)
         self.own_callbacks = bool(own)
         self.stats = learner_stats(cfg, self.asor)
@@ -261,8 +263,8 @@ class Catalogue:
         head, rest = parts[0], parts[1:]
         if not rest:
             return key in TUNE_KEYS or key in TOP_KEYS
-        if head == "env_runners":
-            return self._env_runners(rest)
+        if head == "env_runners":  # an offline run steps no env: no episodes to report
+            return not self.offline and self._env_runners(rest)
         if head == "evaluation":
             if not self.evaluation:
                 return False
@@ -275,9 +277,13 @@ class Catalogue:
             stat = rest[1]
             return stat in self.stats or any(p.match(stat) for p in LEARNER_PATTERNS)
         if head == "replay_buffer":
-            return self.replay and (
-                len(rest) == 1
-                or REPLAY_BUFFER_PER_ID.match(rest[0].replace("num_", "", 1)) is not None
+            return (
+                self.replay
+                and not self.offline
+                and (
+                    len(rest) == 1
+                    or REPLAY_BUFFER_PER_ID.match(rest[0].replace("num_", "", 1)) is not None
+                )
             )
         if head == "asor":
             return self.asor and len(rest) <= 2 and rest[-1] in asor_metrics()
@@ -308,6 +314,12 @@ class Catalogue:
             return (
                 f"evaluation/... is reported only when evaluation runs; allowed: set "
                 f"config.evaluation_interval, or stop on {key.replace('evaluation/', '', 1)}"
+            )
+        if head in ("env_runners", "replay_buffer") and self.offline:
+            return (
+                f"an offline run ({self.run} reading input files) steps no env, so it reports "
+                f"no {head}/...; allowed: training_iteration, time_total_s, learners/..., or "
+                "evaluation/env_runners/... with config.evaluation_interval"
             )
         if head == "asor" and not self.asor:
             return "asor/... metrics exist only with an asor: block in config"

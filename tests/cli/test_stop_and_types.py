@@ -191,3 +191,17 @@ def test_rllib_ab_turns_evaluation_on_so_its_stop_keys_pass():
     check_file(parse_experiment("x", spec, "f.yaml"), evaluation=True)  # what `rllib ab` does
     with pytest.raises(UsageError, match="evaluation_interval"):
         check_file(parse_experiment("x", spec, "f.yaml"))
+
+
+def test_an_offline_run_reports_no_env_runner_episodes(tmp_path):
+    from rllib_asor.cli.errors import UsageError
+    from rllib_asor.cli.validate import check_file
+
+    config = {"input": str(tmp_path / "data"), "evaluation_interval": 1, "lr": None,
+              "dataset_num_iters_per_learner": 1}
+    spec = {"run": "CQL", "env": "Pendulum-v1", "config": config,
+            "stop": {"env_runners/episode_return_mean": -200}}  # fmt: skip
+    with pytest.raises(UsageError, match="offline run .* steps no env"):
+        check_file(parse_experiment("x", spec, "f.yaml"))
+    spec["stop"] = {"evaluation/env_runners/episode_return_mean": -200, "training_iteration": 5}
+    check_file(parse_experiment("x", spec, "f.yaml"))
