@@ -25,7 +25,12 @@ import tree
 from ray.rllib.core.columns import Columns
 from ray.rllib.policy.sample_batch import SampleBatch
 
+from rllib_asor.algorithms.common import gpu_sharing
+
 logger = logging.getLogger(__name__)
+# Every Learner class here imports this module in the process that builds its Learner group:
+# Learners that share a GPU get gloo there instead of NCCL (gpu_sharing.py).
+gpu_sharing.install()
 
 
 class GradientCheckOnceMixin:
