@@ -168,6 +168,7 @@ def check_file(exp: Experiment, evaluation: bool = False) -> None:
     too. Leaves `exp` as it was, but for numbers written as text (read as numbers).
     `evaluation`: the caller turns evaluation on (`evaluation/...` stop keys are reported)."""
     _check_grids(exp)
+    _check_checkpoint_config(exp)
     algorithm_class(exp)
     validate_asor(exp)
     validate_escp(exp)
