@@ -80,6 +80,22 @@ def load_file(path: str) -> list[Experiment]:
     return [parse_experiment(str(name), spec, path) for name, spec in data.items()]
 
 
+def _score_attribute(value: Any, ckpt: dict[str, Any], source: str, warns: list[str]) -> Any:
+    """Old `checkpoint_score_attr` as Tune translated it (`tune.run`): a `min-` prefix means
+    `checkpoint_score_order: min` (else max); an old result name becomes its new one."""
+    if not isinstance(value, str):
+        return value
+    order = "max"
+    if value.startswith("min-"):
+        value, order = value[4:], "min"
+    ckpt.setdefault("checkpoint_score_order", order)
+    new = legacy.RENAMED_STOP_KEYS.get(value)
+    if new is not None:
+        warns.append(f"{source}: legacy result name '{value}' translated to '{new}'")
+        value = new
+    return value
+
+
 def absolute_input(value: Any) -> Any:
     """Offline `input` paths made absolute against the launch directory: Tune runs each trial
     in its own directory, where a relative `data/offline/...` would not be found."""
@@ -103,6 +119,8 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
         if old in spec:
             value = spec.pop(old)
             if section == "checkpoint_config":
+                if old == "checkpoint_score_attr":
+                    value = _score_attribute(value, ckpt, source, warns)
                 ckpt.setdefault(new, value)
                 warns.append(
                     f"{source}: legacy key '{old}' translated to 'checkpoint_config.{new}'"

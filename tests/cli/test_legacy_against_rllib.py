@@ -148,3 +148,49 @@ def test_a_wrong_entry_fails(monkeypatch, old, wrong):
     monkeypatch.setitem(legacy.RENAMED_CONFIG_KEYS, "no_such_old_key", "lr")
     with pytest.raises(AssertionError, match="says nothing"):
         test_rllib_says_the_old_key_became_ours("no_such_old_key", "lr")
+
+
+@functools.lru_cache(maxsize=1)
+def tune_run_says() -> dict[str, set[str]]:
+    """Old `tune.run` argument -> what Tune 2.60's own translation sets: the
+    `checkpoint_config.<attr> = ...` assignments under `if <old> ...:`, and the names its
+    deprecation text for the argument points to."""
+    import ray.tune.tune as tune_module
+
+    tree = ast.parse(Path(tune_module.__file__).read_text(encoding="utf-8"))
+    run = next(n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef) and n.name == "run")
+    said: dict[str, set[str]] = {}
+    for node in ast.walk(run):
+        if not isinstance(node, ast.If):
+            continue
+        olds = {n.id for n in ast.walk(node.test) if isinstance(n, ast.Name)}
+        for inner in ast.walk(node):
+            targets = getattr(inner, "targets", [])
+            for t in targets:
+                if isinstance(t, ast.Attribute) and getattr(t.value, "id", "") == "checkpoint_config":
+                    for old in olds:
+                        said.setdefault(old, set()).add(t.attr)
+            if isinstance(inner, ast.Constant) and isinstance(inner.value, str):
+                for old in olds:
+                    said.setdefault(old, set()).update(WORD.findall(inner.value))
+    return said
+
+
+@pytest.mark.parametrize("old, target", sorted(legacy.RENAMED_SPEC_KEYS.items()))
+def test_experiment_keys_go_where_tune_run_sent_them(old, target):
+    _, new = target
+    assert new in tune_run_says().get(old, set()), (old, new, tune_run_says().get(old))
+
+
+def test_checkpoint_score_attr_keeps_tunes_min_prefix_and_new_result_names():
+    from rllib_asor.cli.spec import parse_experiment
+
+    spec = {"run": "PPO", "env": "CartPole-v1", "checkpoint_score_attr": "min-episode_reward_mean"}
+    exp = parse_experiment("e", spec, "f.yaml")
+    assert exp.checkpoint_config == {
+        "checkpoint_score_attribute": "env_runners/episode_return_mean",
+        "checkpoint_score_order": "min",
+    }
+    assert {"checkpoint_score_attribute", "checkpoint_score_order"} <= tune_run_says()[
+        "checkpoint_score_attr"
+    ]
