@@ -194,3 +194,36 @@ def test_checkpoint_score_attr_keeps_tunes_min_prefix_and_new_result_names():
     assert {"checkpoint_score_attribute", "checkpoint_score_order"} <= tune_run_says()[
         "checkpoint_score_attr"
     ]
+
+
+def test_sac_optimization_keys_become_sac_setter_parameters():
+    """`optimization: {actor_learning_rate, ...}` (old SAC) lands on 2.60 `SACConfig.training`
+    parameters, and `entropy_learning_rate` on the one for the entropy coefficient alpha."""
+    from rllib_asor.cli import retired
+
+    params = inspect.signature(SACConfig.training).parameters
+    assert set(retired.OPTIMIZATION_KEYS.values()) <= set(params)
+    assert set(retired.OPTIMIZATION_KEYS) == set(SACConfig().optimization)  # RLlib's old dict
+    for old, new in retired.OPTIMIZATION_KEYS.items():
+        assert old.split("_")[0] in {"actor": "actor", "critic": "critic", "alpha": "entropy"}[
+            new.split("_")[0]
+        ], (old, new)
+
+
+def test_replay_keys_land_where_rllib_reads_them():
+    """`buffer_size` -> `capacity` is RLlib's own deprecation message; every replay key we
+    write is a constructor argument of the new-stack buffer or a key of SAC's default
+    replay_buffer_config; a prioritized old type stays prioritized."""
+    from ray.rllib.utils import replay_buffers
+
+    from rllib_asor.cli import retired
+
+    assert "capacity" in rllib_says("buffer_size")
+    known = set(SACConfig().replay_buffer_config)
+    for cls in (replay_buffers.PrioritizedEpisodeReplayBuffer, replay_buffers.EpisodeReplayBuffer):
+        known |= set(inspect.signature(cls.__init__).parameters)
+    assert set(retired.REPLAY_TOP_KEYS.values()) <= known
+    for old, new in retired.REPLAY_TYPES.items():
+        new_cls = getattr(replay_buffers, new)
+        assert issubclass(new_cls, replay_buffers.EpisodeReplayBuffer)
+        assert ("Prioritized" in old) == ("Prioritized" in new), (old, new)
