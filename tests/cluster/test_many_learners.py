@@ -87,9 +87,16 @@ def _escp() -> Any:
     return rllib_asor.with_asor(config, seed=0, real_source="batch")
 
 
+def _local_sampling(make: Any) -> Any:
+    """`make()` sampling in the driver: what this test checks lives in the two Learners, and a
+    remote EnvRunner is one more process to start per build (tests/cluster/test_faults.py and
+    test_multi_node.py train with remote runners)."""
+    return make().env_runners(num_env_runners=0)
+
+
 @pytest.mark.parametrize("make", [_ppo, _sac, _escp], ids=["ppo", "sac", "escp"])
 def test_asor_trains_on_two_learners_with_one_state(make, ray_session, tmp_path):
-    algo = make().build_algo()
+    algo = _local_sampling(make).build_algo()
     try:
         for _ in range(3):
             result = algo.train()
@@ -105,7 +112,7 @@ def test_asor_trains_on_two_learners_with_one_state(make, ray_session, tmp_path)
         checkpoint = algo.save_to_path(str(tmp_path / "ckpt"))
     finally:
         algo.stop()
-    restored = make().build_algo()
+    restored = _local_sampling(make).build_algo()
     try:
         restored.restore_from_path(checkpoint)
         after = _per_rank(restored)
