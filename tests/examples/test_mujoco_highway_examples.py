@@ -51,6 +51,11 @@ def test_asor_examples_use_the_robust_default_and_srpo_examples_the_paper(path):
         assert cfg_asor.preset == ("robust" if mode == "asor" else "paper")
 
 
+# The trial samples in its own actor: two remote EnvRunners (what `--test` starts) are two more
+# processes that import torch and the env; tests/cli/test_e2e.py trains `--test` with them.
+LOCAL_SAMPLING = ("--num-env-runners", "0")
+
+
 def _patched(tmp_path: Path, name: str, replace: dict[str, str]) -> Path:
     """A copy of tuned_examples/NAME with exact text replacements (each must match once)."""
     text = (REPO / "tuned_examples" / name).read_text()
@@ -85,7 +90,8 @@ def test_sac_asor_hopper_test_run_reports_asor_metrics(tmp_path, ray_session):
         },
     )
     rc, out, err = _run(
-        ["train", "file", str(path), "--test", "--storage-path", str(tmp_path / "res")]
+        ["train", "file", str(path), "--test", "--storage-path", str(tmp_path / "res"),
+         *LOCAL_SAMPLING]
     )
     assert rc == 0, err[-3000:]
     trial, result = _last_result(tmp_path / "res/hopper-sac-asor")
@@ -103,7 +109,8 @@ def test_highway_ppo_asor_test_run_reports_asor_metrics(tmp_path, ray_session):
         {"base_vehicles_count: 10": "base_vehicles_count: 3"},
     )
     rc, out, err = _run(
-        ["train", "file", str(path), "--test", "--storage-path", str(tmp_path / "res")]
+        ["train", "file", str(path), "--test", "--storage-path", str(tmp_path / "res"),
+         *LOCAL_SAMPLING]
     )
     assert rc == 0, err[-3000:]
     trial, result = _last_result(tmp_path / "res/highway-ppo-asor")
