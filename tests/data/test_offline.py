@@ -133,7 +133,13 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
         .reporting(min_time_s_per_iteration=0, min_train_timesteps_per_iteration=0)
     )
     # dataset_num_iters_per_learner=1 with num_learners=0 trips RLlib 2.60 (docs/offline.md).
-    offline_input(config, dataset, dataset_num_iters_per_learner=2)
+    # One OfflinePreLearner actor instead of Ray Data's default two: one process less to start.
+    offline_input(
+        config,
+        dataset,
+        dataset_num_iters_per_learner=2,
+        map_batches_kwargs={"concurrency": 1, "num_cpus": 0.5},
+    )
     # A λ schedule over dataset rows trained: 0 for the first minibatch (row 0), 0.1 from row 64.
     algo = rllib_asor.with_asor(
         config, preset="paper", lambda_=[[0, 0.0], [64, 0.1]], seed=0
