@@ -191,6 +191,11 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
             from rllib_asor.algorithms.common.callbacks import add_callbacks
 
             add_callbacks(cfg, curriculum)
+        if exp.asor is None:  # with_asor's own metrics callback drops them for ASOR runs
+            from rllib_asor.algorithms.common.callbacks import add_callbacks
+            from rllib_asor.rllib.callbacks import DropNaNLearnerStatsCallback
+
+            add_callbacks(cfg, DropNaNLearnerStatsCallback)
         if exp.asor is None and exp.run == "PPO":  # with_asor's PPO Learner reads the key too
             from rllib_asor.algorithms.ppo.lean import drop_bootstrap_rows, drop_enabled
 

@@ -62,11 +62,16 @@ def _gym_override_warning_lines() -> list[str]:
     import gymnasium as gym
 
     env_id = "rllib-single-agent-env-v0"
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        gym.register(env_id, entry_point="gymnasium.envs.classic_control:CartPoleEnv")
-        gym.register(env_id, entry_point="gymnasium.envs.classic_control:CartPoleEnv")
-    gym.registry.pop(env_id, None)
+    earlier = gym.registry.pop(env_id, None)  # an env runner built earlier in this process
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            gym.register(env_id, entry_point="gymnasium.envs.classic_control:CartPoleEnv")
+            gym.register(env_id, entry_point="gymnasium.envs.classic_control:CartPoleEnv")
+    finally:
+        gym.registry.pop(env_id, None)
+        if earlier is not None:
+            gym.registry[env_id] = earlier
     (w,) = [w for w in caught if "Overriding environment" in str(w.message)]
     return warnings.formatwarning(w.message, w.category, w.filename, w.lineno).splitlines()
 
