@@ -12,6 +12,9 @@ instead: each `torch.<factory>(...)` call must
   which moves with `module.to(device)` (RLlib moves every module to the Learner's device), or
 - be listed in `ALLOWED` below with a one-line reason (keyed by file, enclosing function and
   factory, so the list survives edits; an entry that matches nothing fails the test).
+
+The way back fails the same way: `.numpy()` of a cuda tensor raises, so every `.numpy()` must
+come after `.cpu()` (dtype and `detach` calls may sit between them).
 """
 
 from __future__ import annotations
@@ -183,6 +186,34 @@ def test_every_tensor_factory_names_its_device() -> None:
         "or add to ALLOWED in tests/test_tensor_devices.py with a reason):\n"
         + "\n".join(f"  {c}" for c in unlisted)
     )
+
+
+def numpy_calls_off_the_cpu(source: str, path: str) -> list[str]:
+    """`<tensor>.numpy()` calls not preceded by `.cpu()` in one file's source."""
+    tree = ast.parse(source)
+    bad = []
+    for node in ast.walk(tree):
+        if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "numpy" and not node.args):
+            continue
+        receiver = node.func.value
+        while (isinstance(receiver, ast.Call) and isinstance(receiver.func, ast.Attribute)
+               and receiver.func.attr in PASS_THROUGH):
+            receiver = receiver.func.value
+        on_cpu = (isinstance(receiver, ast.Call) and isinstance(receiver.func, ast.Attribute)
+                  and receiver.func.attr == "cpu")
+        if not on_cpu:
+            bad.append(f"rllib_asor/{path}:{node.lineno}")
+    return bad
+
+
+def test_every_numpy_conversion_comes_from_the_cpu() -> None:
+    bad = []
+    for file in sorted(PACKAGE.rglob("*.py")):
+        bad += numpy_calls_off_the_cpu(file.read_text(), file.relative_to(PACKAGE).as_posix())
+    assert not bad, "`.numpy()` without `.cpu()` first (fails on a cuda tensor):\n" + "\n".join(bad)
+    snippet = "a = x.numpy()\nb = x.detach().cpu().double().numpy()\nc = x.cpu().numpy()\n"
+    assert numpy_calls_off_the_cpu(snippet, "snippet.py") == ["rllib_asor/snippet.py:1"]
 
 
 def test_allow_list_entries_are_used_and_explained() -> None:
