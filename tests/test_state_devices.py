@@ -225,3 +225,37 @@ def test_the_asor_connector_makes_its_tensors_on_the_device_of_the_batch(
     finally:
         algo.stop()
     assert np.isfinite(result["asor"]["disc_loss"]) and np.isfinite(result["asor"]["lambda"])
+
+
+def test_evaluation_helpers_make_their_inputs_on_the_module_device() -> None:
+    """The race's batched policy and the deterministic action of a SAC module (evaluation of a
+    module straight from a GPU Learner): inputs on the module's device, numpy back out."""
+    import gymnasium as gym
+    from ray.rllib.algorithms.sac import SACConfig
+
+    import game_env
+    from rllib_asor.evaluation.rollout import deterministic_action
+    from rllib_asor.race.evaluation import module_policy
+    from tests.race.test_net import build, obs_batch
+
+    env = gym.make(game_env.ENV_ID, map_id=0)
+    try:
+        torch.manual_seed(0)
+        race_module = build(env)
+        batch = obs_batch(env, n=4)
+    finally:
+        env.close()
+    numpy_batch = {k: np.asarray(v) for k, v in batch.items()}
+    act = module_policy(race_module, explore=False)
+    expected = act(numpy_batch, [])
+    with torch.device("meta"):
+        np.testing.assert_array_equal(act(numpy_batch, []), expected)
+
+    pendulum = gym.make("Pendulum-v1")
+    sac_module = SACConfig().environment("Pendulum-v1").get_rl_module_spec(
+        env=pendulum
+    ).build()
+    obs = pendulum.observation_space.sample()
+    expected = deterministic_action(sac_module, obs)
+    with torch.device("meta"):
+        np.testing.assert_array_equal(deterministic_action(sac_module, obs), expected)
