@@ -23,11 +23,13 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
-import mujoco
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import game_env  # noqa: E402
+from game_env.gl import import_mujoco  # noqa: E402
+
+mujoco = import_mujoco()  # no GL library loaded: the benchmark runs on a machine without libEGL
 
 
 def raw_rate(model: mujoco.MjModel, steps: int) -> float:
