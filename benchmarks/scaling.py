@@ -8,7 +8,8 @@ runner per iteration, minibatch 256, 4 epochs) and each runner count it measures
   update): env steps/s through `learner.update(...)`. A batch for N runners is N recorded
   1,024-step batches (runner k's batch b is recorded batch (b + k) mod B, its episode ids made
   distinct). One pass over the recorded batches is dropped as warm-up (ASOR's archive fills
-  at its end), then `--learner-passes` passes are timed.
+  at its end), then `--learner-passes` passes are timed: by the wall clock, and per second of
+  the process's CPU time (steadier on a shared machine; meaningless for a GPU Learner).
 - `sample`: the env runners alone (remote, one CPU each), each sampling 1,024 env steps at
   once; env steps/s of all of them together.
 - `e2e`: `algo.train()` end to end (sampling, Learner, weight sync), after `--warmup`
