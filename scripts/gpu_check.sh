@@ -42,7 +42,7 @@ if "$py" -c "import pytest" 2>/dev/null; then
   echo "gpu-check: tests exit $? (log: $out/gpu_tests.log)"
   tail -n 3 "$out/gpu_tests.log"
 else
-  echo "gpu-check: skipped the gpu tests: pytest is not installed for $py" | tee "$out/gpu_tests.log"
+  echo "gpu-check: skipped the gpu tests: pytest is not installed for $py (offline kit: run scripts/gpu_kit_extras.sh before carrying .gpu)" | tee "$out/gpu_tests.log"
 fi
 
 # 2. The scaling benchmark: PPO and PPO+ASOR, Learner alone, sampling, end to end (today's
