@@ -66,6 +66,12 @@ def _number(raw: str) -> Any:
     return raw
 
 
+def _cuda_available() -> bool:
+    import torch
+
+    return torch.cuda.is_available()
+
+
 def apply_overrides(
     exp: Experiment,
     *,
@@ -90,6 +96,12 @@ def apply_overrides(
             if family is not None and family.test_env_config:
                 cfg["env_config"] = {**(cfg.get("env_config") or {}), **family.test_env_config}
         cfg["num_learners"] = 0
+        if cfg.get("num_gpus_per_learner") and not _cuda_available():
+            exp.warnings.append(
+                f"{exp.source}: {exp.name}.config.num_gpus_per_learner: "
+                f"{cfg['num_gpus_per_learner']} -> 0 for --test (torch sees no CUDA device)"
+            )
+            cfg["num_gpus_per_learner"] = 0
         cfg["evaluation_interval"] = None
         cfg.pop("train_batch_size_per_learner", None)
         cfg["train_batch_size"] = TEST_BATCH

@@ -54,6 +54,22 @@ def test_test_mode_is_tiny_with_fractional_env_runners(write_yaml):
     assert experiment.required_cpus(cfg) <= 2
 
 
+def test_test_mode_puts_a_gpu_learner_on_the_cpu_when_torch_sees_no_cuda(write_yaml):
+    """`ppo-asor-scale.yaml --test` on a laptop: the file's GPU Learner becomes a CPU Learner,
+    with one warning naming the key (on a machine with CUDA the file's value stays)."""
+    import torch
+
+    path = write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  config: {num_gpus_per_learner: 1}\n")
+    [exp] = experiment.load_file(path)
+    experiment.apply_overrides(exp, test=True)
+    if torch.cuda.is_available():
+        assert exp.config["num_gpus_per_learner"] == 1 and not exp.warnings
+        return
+    assert exp.config["num_gpus_per_learner"] == 0
+    assert any("num_gpus_per_learner: 1 -> 0 for --test" in w for w in exp.warnings)
+    assert experiment.validate(exp).num_gpus_per_learner == 0
+
+
 def test_num_env_runners_and_checkpoint_flags(write_yaml):
     [exp] = experiment.load_file(write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n"))
     experiment.apply_overrides(exp, num_env_runners=3, checkpoint_freq=4)
