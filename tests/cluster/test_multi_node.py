@@ -98,7 +98,8 @@ def test_cli_train_address_joins_the_running_cluster(cluster, tmp_path):
     jobs_before = {j["JobID"] for j in ray._private.state.jobs()}
     proc = subprocess.Popen(
         [RLLIB, "train", "file", str(REPO / "tuned_examples/lava/ppo-asor.yaml"), "--test",
-         "--address", cluster.address, "--storage-path", str(tmp_path)],
+         "--address", cluster.address, "--storage-path", str(tmp_path),
+         "--num-env-runners", "0"],  # joining is the point, not the runners
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         env={**os.environ, "RAY_memory_monitor_refresh_ms": "0"})
     try:
@@ -123,7 +124,7 @@ def test_sac_asor_learners_on_two_nodes_keep_one_state(cluster):
 
     config = _sac().learners(
         num_learners=2, num_cpus_per_learner=0.5, custom_resources_per_learner={SLOT: 1}
-    )
+    ).env_runners(num_env_runners=0)  # the Learners are what it checks: sample in the driver
     algo = config.build_algo()
     try:
         nodes = [c.get() for c in algo.learner_group.foreach_learner(
