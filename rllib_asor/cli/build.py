@@ -5,6 +5,7 @@ from __future__ import annotations
 import difflib
 from typing import Any
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.cli import grid, multi_agent
 from rllib_asor.cli.errors import UsageError, one_line, quiet
 from rllib_asor.cli.spec import Experiment
@@ -24,10 +25,7 @@ SPECIAL_CONFIG_KEYS = (
 
 # Config key (as written) -> key in AlgorithmConfig.to_dict() (the Tune param space).
 PARAM_SPACE_KEYS = {
-    "model_config": "_model_config",
-    "train_batch_size_per_learner": "_train_batch_size_per_learner",
-    "env_to_module_connector": "_env_to_module_connector",
-    "rl_module": "_rl_module_spec",
+    **compat.TO_DICT_KEYS,
     "lambda_": "lambda",
     "input_": "input",
     "framework_str": "framework",
@@ -75,14 +73,10 @@ def algorithm_class(exp: Experiment) -> type:
 
 
 def attr_name(key: str) -> str:
-    from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
-
-    return AlgorithmConfig._translate_special_keys(key, warn_deprecated=False)
+    return compat.config_attr_name(key)
 
 
 def check_key(default_cfg: Any, key: str, exp: Experiment) -> None:
-    from ray._common.deprecation import DEPRECATED_VALUE
-
     if key in SPECIAL_CONFIG_KEYS:
         return
     attr = attr_name(key)
@@ -104,7 +98,7 @@ def check_key(default_cfg: Any, key: str, exp: Experiment) -> None:
             source=exp.source,
             key=where,
         )
-    if getattr(default_cfg, attr, None) == DEPRECATED_VALUE:
+    if getattr(default_cfg, attr, None) == compat.deprecated_value():
         raise UsageError(
             f"is deprecated and has no effect on RLlib's new API stack ({algo})",
             source=exp.source,

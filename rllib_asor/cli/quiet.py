@@ -13,6 +13,8 @@ import re
 import warnings
 from typing import Any
 
+from rllib_asor import ray_compat as compat
+
 VERBOSE_ENV = "RLLIB_ASOR_VERBOSE"
 HARMLESS = re.compile(
     "|".join(
@@ -100,15 +102,12 @@ def quiet_worker_lines() -> None:
     """Drop the harmless lines among the worker output Ray forwards (call after `ray.init`)."""
     if verbose():
         return
-    try:
-        from ray._private.ray_logging import global_worker_stdstream_dispatcher as dispatcher
-    except ImportError:  # a Ray without this hook: show everything
-        return
-    with dispatcher._lock:
-        dispatcher.handlers = [
+    compat.edit_worker_output_handlers(  # a Ray without this hook: show everything
+        lambda handlers: [
             (name, handler if name != "ray_print_logs" else _filtered(handler))
-            for name, handler in dispatcher.handlers
+            for name, handler in handlers
         ]
+    )
 
 
 def _filtered(handler: Any) -> Any:

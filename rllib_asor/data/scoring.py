@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.data.format import read_manifest
 
 
@@ -60,7 +61,7 @@ def policy_module(algo_or_path: Any) -> Any:
                 f"checkpoint {path} does not exist; expected an Algorithm or RLModule checkpoint"
             )
         return RLModule.from_checkpoint(path.as_posix())
-    learner = getattr(algo_or_path.learner_group, "_learner", None)
+    learner = compat.local_learner(algo_or_path.learner_group)
     if learner is not None:
         return learner.module[DEFAULT_MODULE_ID]
     module = algo_or_path.get_module(DEFAULT_MODULE_ID)

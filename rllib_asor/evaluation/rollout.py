@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from rllib_asor import ray_compat as compat
+
 Transform = Callable[[np.ndarray], np.ndarray]
 
 
@@ -37,7 +39,7 @@ def deterministic_sample(dist: Any) -> Any:
     from ray.rllib.core.distribution.torch.torch_distribution import TorchSquashedGaussian
 
     if isinstance(dist, TorchSquashedGaussian):
-        return dist._squash(dist.loc)
+        return compat.squash(dist, dist.loc)
     return dist.to_deterministic().sample()
 
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import importlib
 
+from rllib_asor import ray_compat as compat
+
 ALGORITHMS = {
     "MAPLE": "rllib_asor.algorithms.maple.maple:MAPLE",
     "MOPO": "rllib_asor.algorithms.maple.maple:MOPO",
@@ -24,8 +26,8 @@ def algorithm(name: str) -> type:
 
 def register_algorithms() -> None:
     """Register our algorithms with Tune (once per process)."""
-    from ray.tune.registry import TRAINABLE_CLASS, _global_registry, register_trainable
+    from ray.tune.registry import TRAINABLE_CLASS, register_trainable
 
     for name in ALGORITHMS:
-        if not _global_registry.contains(TRAINABLE_CLASS, name):
+        if not compat.tune_registry_contains(TRAINABLE_CLASS, name):
             register_trainable(name, algorithm(name))

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.registry import envs
 
 # Old module path prefix -> where RLlib moved it (Ray 2.10: examples/env -> examples/envs/classes).
@@ -223,9 +224,9 @@ def build_env(ref: EnvRef, env_config: Any = None) -> Any:
 
     config = dict(env_config or {})
     if ref.tune:
-        from ray.tune.registry import ENV_CREATOR, _global_registry
+        from ray.tune.registry import ENV_CREATOR
 
-        return _global_registry.get(ENV_CREATOR, ref.name)(
+        return compat.tune_registry_get(ENV_CREATOR, ref.name)(
             env_config if env_config is not None else config
         )
     if ref.module is not None:

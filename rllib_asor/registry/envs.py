@@ -6,6 +6,8 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from rllib_asor import ray_compat as compat
+
 # Modules whose import registers gymnasium ids; either may not exist (yet).
 REGISTERING_MODULES = ("rllib_asor.envs", "game_env")
 
@@ -44,9 +46,9 @@ def register_race_envs() -> None:
 
 def in_tune_registry(env_id: str) -> bool:
     """True if Tune has a creator registered under `env_id`."""
-    from ray.tune.registry import ENV_CREATOR, _global_registry
+    from ray.tune.registry import ENV_CREATOR
 
-    return _global_registry.contains(ENV_CREATOR, env_id)
+    return compat.tune_registry_contains(ENV_CREATOR, env_id)
 
 
 def env_exists(env_id: str) -> bool:

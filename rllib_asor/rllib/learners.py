@@ -33,6 +33,7 @@ from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common.ddp import SortedModuleGradientsMixin
 from rllib_asor.algorithms.common.learner_speed import SameMathSpeedMixin
 from rllib_asor.algorithms.common.pipeline import insert_beside
@@ -126,7 +127,7 @@ class AsorLearnerMixin(SameMathSpeedMixin):
             self._insert_asor_piece()
 
     def _insert_asor_piece(self) -> None:
-        pipeline = self._learner_connector
+        pipeline = compat.learner_connector(self)
         if pipeline is None:
             raise ValueError(
                 "ASOR needs the Learner connector pipeline; set num_aggregator_actors_per_learner=0"
@@ -197,7 +198,7 @@ class AsorLearnerMixin(SameMathSpeedMixin):
         """The iterator's minibatches; an aux module's batch leaves the iterator once it has
         trained on `aux_rows` rows, instead of being sliced (and reshuffled) for every policy
         minibatch after it and dropped in `_update` (~3 % of a race PPO update)."""
-        module_batches = batch_iter._batch.policy_batches
+        module_batches = compat.iterator_batch(batch_iter).policy_batches
         for minibatch in batch_iter:
             yield minibatch  # `_update` counts the aux rows it trains on
             for module_id in [m for m in module_batches if is_aux_module(m)]:
@@ -205,7 +206,7 @@ class AsorLearnerMixin(SameMathSpeedMixin):
                     del module_batches[module_id]
                     # Without a fixed minibatch count the iterator runs until every module it
                     # tracks covered num_epochs: stop tracking the one that left.
-                    batch_iter._num_covered_epochs.pop(module_id, None)
+                    compat.iterator_covered_epochs(batch_iter).pop(module_id, None)
 
     def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
         if self.asor_in_pipeline:
@@ -236,7 +237,7 @@ class AsorLearnerMixin(SameMathSpeedMixin):
         asor = AsorConfig.from_dict(self.config.learner_config_dict.get("asor"))
         is_disc = module_id.startswith(DISC_PREFIX)
         lr = asor.disc_lr if is_disc else asor.rnd_lr
-        params = [p for p in self._module[module_id].parameters() if p.requires_grad]
+        params = [p for p in self.module[module_id].parameters() if p.requires_grad]
         self.register_optimizer(
             module_id=module_id,
             optimizer=torch.optim.Adam(
@@ -278,7 +279,7 @@ class _SoftQAsorMixin(AsorLearnerMixin, SortedModuleGradientsMixin):
         losses = super().compute_losses(fwd_out=fwd_out, batch=batch)  # type: ignore[misc]
         for module_id, loss in losses.items():
             if is_aux_module(module_id):
-                self._temp_losses[(module_id, "default_optimizer_loss")] = loss
+                compat.temp_losses(self)[(module_id, "default_optimizer_loss")] = loss
         return losses
 
 

@@ -23,6 +23,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common.callbacks import add_callbacks
 from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
 from rllib_asor.asor.config import ALGORITHMS, AsorConfig
@@ -153,7 +154,7 @@ def trained_policy_ids(config: AlgorithmConfig) -> list[str]:
 
 
 def _module_spec(config: AlgorithmConfig, asor: AsorConfig) -> AsorMultiRLModuleSpec:
-    existing = config._rl_module_spec
+    existing = compat.user_rl_module_spec(config)
     pids = trained_policy_ids(config)
     all_pids = list(config.policies) if config.is_multi_agent else [DEFAULT_MODULE_ID]
     keep: dict[str, Any] = {}

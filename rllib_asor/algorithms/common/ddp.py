@@ -17,16 +17,18 @@ from typing import Any
 
 from ray.rllib.core import ALL_MODULES
 
+from rllib_asor import ray_compat as compat
+
 
 class SortedModuleGradientsMixin:
     """`compute_gradients` of the base Learner, one module at a time, in sorted module-id order.
 
-    The base implementation pops `self._temp_losses[(module_id, "<optimizer>_loss")]` for the
+    The base implementation pops `compat.temp_losses(self)[(module_id, "<optimizer>_loss")]` for the
     modules it is given and asserts none is left, so each call sees only its module's losses.
     """
 
     def compute_gradients(self, loss_per_module: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
-        temp: dict[tuple[str, str], Any] = self._temp_losses  # type: ignore[attr-defined]
+        temp = compat.temp_losses(self)
         pending = dict(temp)
         temp.clear()
         grads: dict[str, Any] = {}

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from rllib_asor import ray_compat as compat
+
 
 def shares_a_gpu(resources_per_learner: dict[str, Any]) -> bool:
     """Whether Learners with these resources may sit on one GPU (a fraction of a GPU each)."""
@@ -22,11 +24,9 @@ def shares_a_gpu(resources_per_learner: dict[str, Any]) -> bool:
 def install() -> None:
     """Make RLlib's Learner groups use gloo when their Learners share a GPU (idempotent;
     call on the driver before the algorithm is built)."""
-    from ray.rllib.core.learner import learner_group
-
-    if getattr(learner_group._get_backend_config, "shares_gpus_with_gloo", False):
+    original = compat.backend_config_factory()
+    if getattr(original, "shares_gpus_with_gloo", False):
         return
-    original = learner_group._get_backend_config
 
     def backend_config(learner_class: type) -> Any:
         config = original(learner_class)
@@ -48,4 +48,4 @@ def install() -> None:
         return SharedGpuConfig()
 
     backend_config.shares_gpus_with_gloo = True  # type: ignore[attr-defined]
-    learner_group._get_backend_config = backend_config
+    compat.set_backend_config_factory(backend_config)

@@ -25,6 +25,7 @@ import tree
 from ray.rllib.core.columns import Columns
 from ray.rllib.policy.sample_batch import SampleBatch
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common import gpu_sharing
 
 logger = logging.getLogger(__name__)
@@ -126,8 +127,9 @@ class OffPolicynessOnceMixin:
     _off_policyness_seq_no = -1
 
     def _compute_off_policyness(self, batch: Any) -> None:
-        if self._off_policyness_seq_no != self._weights_seq_no:  # type: ignore[attr-defined]
-            self._off_policyness_seq_no = self._weights_seq_no  # type: ignore[attr-defined]
+        seq_no = compat.weights_seq_no(self)
+        if self._off_policyness_seq_no != seq_no:
+            self._off_policyness_seq_no = seq_no
             super()._compute_off_policyness(batch)  # type: ignore[misc]
 
 

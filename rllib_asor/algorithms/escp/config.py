@@ -31,6 +31,7 @@ from ray.rllib.algorithms.sac.sac import SAC, SACConfig
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.escp.connector import EscpEnvToModule
 from rllib_asor.algorithms.escp.learner import EscpLearnerMixin, EscpTorchLearner
 from rllib_asor.algorithms.escp.module import ESCP_KEY, EscpTorchRLModule
@@ -55,7 +56,7 @@ class EscpConfig(SACConfig):
         self.train_batch_size_per_learner = 256
         self.num_steps_sampled_before_learning_starts = 20_000
         self.replay_buffer_config = {"type": "EpisodeReplayBuffer", "capacity": 1_000_000}
-        self._model_config = {"fcnet_hiddens": [128, 64], "fcnet_activation": "leaky_relu"}
+        self.rl_module(model_config={"fcnet_hiddens": [128, 64], "fcnet_activation": "leaky_relu"})
         self.escp_settings: dict[str, Any] = EscpSettings().to_dict()
         # With several Learners (DDP): the encoder learns from RMDM alone, which is off until
         # enough tasks are in the replay (and per batch), so it legitimately has no gradient
@@ -96,7 +97,7 @@ def check_escp_config(config: SACConfig) -> None:
             f"replay_buffer_config.type={rb_type!r} is not allowed for ESCP; expected "
             "'EpisodeReplayBuffer' (uniform replay; ESCP keeps its own flat buffer)"
         )
-    learner = config._learner_class
+    learner = compat.user_learner_class(config)
     if learner is not None and not (
         isinstance(learner, type) and issubclass(learner, EscpLearnerMixin)
     ):
@@ -119,10 +120,12 @@ def escp_fast_path(config: SACConfig) -> SACConfig:
     settings = EscpSettings.from_dict(getattr(config, "escp_settings", None))
     h = settings.history_len
     config.env_runners(
-        env_to_module_connector=EscpEnvToModule(h, user=config._env_to_module_connector),
+        env_to_module_connector=EscpEnvToModule(
+            h, user=compat.user_env_to_module_connector(config)
+        ),
         episode_lookback_horizon=max(int(config.episode_lookback_horizon or 1), h),
     )
-    if config._learner_class is None:
+    if compat.user_learner_class(config) is None:
         config.learners(learner_class=EscpTorchLearner)
     _policy_module_class(config)
     lcd[FAST_KEY] = True
@@ -139,7 +142,7 @@ def escp_fast_path(config: SACConfig) -> SACConfig:
 
 
 def _policy_module_class(config: SACConfig) -> None:
-    spec = config._rl_module_spec
+    spec = compat.user_rl_module_spec(config)
     if isinstance(spec, MultiRLModuleSpec):
         for sub in spec.rl_module_specs.values():
             if not sub.learner_only and sub.module_class is None:

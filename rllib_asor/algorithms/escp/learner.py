@@ -24,6 +24,7 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.learner import POLICY_LOSS_KEY
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.escp.module import CONTEXT, EscpTorchRLModule
 from rllib_asor.algorithms.escp.replay import DYNAMICS_ID
 from rllib_asor.algorithms.escp.rmdm import TaskSlots, rmdm_loss, rmdm_switched_on
@@ -44,17 +45,18 @@ class EscpLearnerMixin:
             target = self.config.get_config_for_module(mid).target_entropy  # type: ignore[attr-defined]
             if target is None or target == "auto":
                 value = -ratio * float(np.prod(module.action_space.shape))
-                self.target_entropy[mid] = self._get_tensor_variable(value)  # type: ignore[attr-defined]
+                entropy = torch.tensor(value, dtype=torch.float32, device=self.device)  # type: ignore[attr-defined]
+                self.target_entropy[mid] = entropy  # type: ignore[attr-defined]
 
     def _escp_modules(self) -> dict[str, EscpTorchRLModule]:
         return {
             mid: m.unwrapped()
-            for mid, m in self.module._rl_modules.items()  # type: ignore[attr-defined]
+            for mid, m in self.module.items()  # type: ignore[attr-defined]
             if isinstance(m.unwrapped(), EscpTorchRLModule)
         }
 
     def configure_optimizers_for_module(self, module_id: str, config: Any = None) -> None:
-        module = self._module[module_id].unwrapped()  # type: ignore[attr-defined]
+        module = self.module[module_id].unwrapped()  # type: ignore[attr-defined]
         if not isinstance(module, EscpTorchRLModule):
             return super().configure_optimizers_for_module(module_id, config)  # type: ignore[misc]
         groups = {
@@ -81,7 +83,7 @@ class EscpLearnerMixin:
     def compute_loss_for_module(
         self, *, module_id: str, config: Any, batch: dict[str, Any], fwd_out: dict[str, Any]
     ) -> torch.Tensor:
-        module = self._module[module_id].unwrapped()  # type: ignore[attr-defined]
+        module = self.module[module_id].unwrapped()  # type: ignore[attr-defined]
         if not isinstance(module, EscpTorchRLModule):
             return super().compute_loss_for_module(  # type: ignore[misc]
                 module_id=module_id, config=config, batch=batch, fwd_out=fwd_out
@@ -101,7 +103,7 @@ class EscpLearnerMixin:
         losses["alpha"] = -(alpha * (logp + target_entropy).detach()).mean()
         losses[ENCODER_OPTIMIZER] = self._rmdm(module_id, module, batch, fwd_out[CONTEXT])
         for name, loss in losses.items():
-            self._temp_losses[(module_id, name + "_loss")] = loss  # type: ignore[attr-defined]
+            compat.temp_losses(self)[(module_id, name + "_loss")] = loss
         self.metrics.log_dict(  # type: ignore[attr-defined]
             {
                 POLICY_LOSS_KEY: losses["policy"],

@@ -32,6 +32,7 @@ from ray.rllib.core.rl_module.apis import InferenceOnlyAPI, QNetAPI, TargetNetwo
 from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
 from torch import nn
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.escp.encoder import ContextEncoder, add_context_noise
 from rllib_asor.algorithms.escp.replay import DYNAMICS_ID, NEXT_WINDOW, WINDOW
 from rllib_asor.algorithms.escp.rmdm import TaskSlots
@@ -249,7 +250,7 @@ class EscpSquashedGaussian(TorchSquashedGaussian):
     (`Policy.rsample` returns `torch.tanh(mu)`); RLlib's returns the unsquashed μ."""
 
     def to_deterministic(self) -> TorchDeterministic:
-        return TorchDeterministic(loc=self._squash(self.loc))
+        return TorchDeterministic(loc=compat.squash(self, self.loc))
 
 
 def _dist_cls(action_space: gym.spaces.Box) -> type:

@@ -29,7 +29,7 @@ class MapleTorchLearner(SameMathSpeedMixin, TorchLearner):
     """See the module docstring."""
 
     def configure_optimizers_for_module(self, module_id: str, config: Any = None) -> None:
-        module = self._module[module_id].unwrapped()
+        module = self.module[module_id].unwrapped()
         if not isinstance(module, MapleTorchRLModule):
             return super().configure_optimizers_for_module(module_id, config)
         s = module.settings
@@ -50,7 +50,7 @@ class MapleTorchLearner(SameMathSpeedMixin, TorchLearner):
     def compute_loss_for_module(
         self, *, module_id: str, config: Any, batch: dict[str, Any], fwd_out: dict[str, Any]
     ) -> torch.Tensor:
-        module = self._module[module_id].unwrapped()
+        module = self.module[module_id].unwrapped()
         b = {k: batch[k] for k in (*SEGMENT_KEYS, *HIDDEN_KEYS)}
         b["valid"] = b["valid"].bool()
         b["terminateds"] = b["terminateds"].bool()
@@ -86,10 +86,12 @@ class MapleTorchLearner(SameMathSpeedMixin, TorchLearner):
             loss = loss_per_module[module_id]
             named = dict(self.get_optimizers_for_module(module_id))
             parts = self._maple_losses.get(module_id)
+            module = self.module[module_id]
+            by_ref = {self.get_param_ref(p): p for p in self.get_parameters(module)}
             for optim_name, optim in named.items():
                 part = parts[optim_name] if parts is not None else loss
-                refs = self._optimizer_parameters[optim]
-                params = [self._params[r] for r in refs]
+                own = self.filter_param_dict_for_optimizer(by_ref, optim)
+                refs, params = list(own), list(own.values())
                 gs = torch.autograd.grad(part, params, retain_graph=True, allow_unused=True)
                 for ref, p, g in zip(refs, params, gs, strict=True):
                     grads[ref] = torch.zeros_like(p) if g is None else g
@@ -102,5 +104,5 @@ class MapleTorchLearner(SameMathSpeedMixin, TorchLearner):
     def apply_gradients(self, gradients_dict: dict[Any, Any]) -> None:
         super().apply_gradients(gradients_dict)
         for module_id in self._maple_losses:
-            module = self._module[module_id].unwrapped()
+            module = self.module[module_id].unwrapped()
             module.nets.polyak(module.settings.tau)

@@ -40,6 +40,7 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import LEARNER_RESULTS
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.maple.data import load_trajectories
 from rllib_asor.algorithms.maple.ensemble import (
     GaussianEnsemble,
@@ -277,7 +278,7 @@ class MAPLE(Algorithm):
     def _module(self) -> Any:
         """The current MAPLE module on the driver (the local Learner's, or a synced copy)."""
         if self.learner_group.is_local:
-            return self.learner_group._learner.module[DEFAULT_MODULE_ID].unwrapped()
+            return compat.local_learner(self.learner_group).module[DEFAULT_MODULE_ID].unwrapped()
         if not hasattr(self, "_driver_module"):
             import gymnasium as gym
 
@@ -316,7 +317,7 @@ class MAPLE(Algorithm):
         """RLlib's state plus the driver's sampler: its random generator and, with
         `checkpoint_model_pool`, the model pool."""
         state = super().get_state(components, not_components=not_components, **kwargs)
-        if self._check_component(SAMPLER_STATE, components, not_components):
+        if compat.wants_component(self, SAMPLER_STATE, components, not_components):
             state[SAMPLER_STATE] = {
                 "rng": self._rng.bit_generator.state,
                 "pool": self._pool.get_state() if self._settings.checkpoint_model_pool else None,

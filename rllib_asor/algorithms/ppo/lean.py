@@ -27,6 +27,7 @@ from ray.rllib.connectors.connector_v2 import ConnectorV2
 from ray.rllib.connectors.learner import GeneralAdvantageEstimation
 from ray.rllib.core.columns import Columns
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common.learner_speed import SameMathSpeedMixin, take_rows
 from rllib_asor.algorithms.common.pipeline import insert_beside
 
@@ -48,11 +49,12 @@ def drop_bootstrap_rows(config: AlgorithmConfig, enabled: bool = True) -> Algori
         name = getattr(config.algo_class, "__name__", type(config).__name__)
         raise ValueError(f"drop_bootstrap_rows needs a PPO config, got {name}")
     config = config.copy(copy_frozen=False)
-    if config._learner_class is None:
+    learner = compat.user_learner_class(config)
+    if learner is None:
         config.learners(learner_class=LeanPPOTorchLearner)
-    elif not issubclass(config._learner_class, LeanPPOMixin):
+    elif not issubclass(learner, LeanPPOMixin):
         raise ValueError(
-            f"drop_bootstrap_rows: the Learner class {config._learner_class.__name__} would "
+            f"drop_bootstrap_rows: the Learner class {learner.__name__} would "
             "ignore it; mix rllib_asor.algorithms.ppo.lean.LeanPPOMixin into it (before PPO's Learner) "
             "or leave learner_class unset"
         )
@@ -84,7 +86,7 @@ class LeanPPOMixin:
         super().build()  # type: ignore[misc]
         if not drop_enabled(self.config):  # type: ignore[attr-defined]
             return
-        pipeline = self._learner_connector  # type: ignore[attr-defined]
+        pipeline = compat.learner_connector(self)
         if pipeline is None:
             raise ValueError(
                 f"{DROP_KEY} needs the Learner connector pipeline; "

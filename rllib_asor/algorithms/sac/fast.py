@@ -57,6 +57,7 @@ from ray.rllib.core.models.torch.encoder import TorchMLPEncoder
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
 from rllib_asor.evaluation.rollout import deterministic_sample
 
@@ -130,7 +131,7 @@ class FastSACCatalog(SACCatalog):
         return SquashedGaussian if cls is TorchSquashedGaussian else cls
 
     def _build_qf_encoder_continuous(self, framework: str) -> Any:
-        obs_space, enc = self.observation_space, self._encoder_config
+        obs_space, enc = self.observation_space, compat.catalog_encoder_config(self)
         if not (
             framework == "torch"
             and isinstance(obs_space, gym.spaces.Box)
@@ -179,7 +180,7 @@ def _fast_module_class(algo: str) -> type:
 def _set_module_class(config: Any, algo: str) -> None:
     """Give every policy spec that uses RLlib's default SAC/CQL module our fast module."""
     fast = _fast_module_class(algo)
-    spec = config._rl_module_spec
+    spec = compat.user_rl_module_spec(config)
     if spec is None:
         config.rl_module(rl_module_spec=RLModuleSpec(module_class=fast))
     elif isinstance(spec, MultiRLModuleSpec):
@@ -237,7 +238,7 @@ def _fast_replay(config: Any) -> None:
     from rllib_asor.algorithms.common.callbacks import add_callbacks
 
     add_callbacks(config, FlatReplayCallback)
-    if config._learner_class is None:
+    if compat.user_learner_class(config) is None:
         config.learners(learner_class=FastSACTorchLearner)
     if config.rollout_fragment_length != "auto":
         return  # the user's own sampling/update rhythm: one gradient step per Learner call

@@ -37,7 +37,7 @@ class FastSACLearnerMixin(SameMathSpeedMixin):
         cols = episodes[0].columns
         if len(episodes) > 1:
             cols = {k: np.concatenate([e.columns[k] for e in episodes]) for k in cols}
-        device = self._device  # type: ignore[attr-defined]
+        device = self.device  # type: ignore[attr-defined]
         n = len(cols[Columns.REWARDS])
         pb = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device) for k, v in cols.items()}
         pb["n_step"] = torch.ones(n, dtype=torch.int64, device=device)
@@ -85,7 +85,7 @@ class FastSACLearnerMixin(SameMathSpeedMixin):
 
     @torch.no_grad()
     def _polyak_targets(self) -> None:
-        for mid, module in self.module._rl_modules.items():  # type: ignore[attr-defined]
+        for mid, module in self.module.items():  # type: ignore[attr-defined]
             inner = module.unwrapped()
             if not isinstance(inner, TargetNetworkAPI):
                 continue
