@@ -1,6 +1,7 @@
-"""Shared fixtures: one small local Ray instance per test session."""
+"""Shared fixtures: one small local Ray instance per test session, one small offline dataset."""
 
 import os
+from pathlib import Path
 
 import pytest
 
@@ -36,3 +37,21 @@ def ray_session():
             configure_logging=False,
         )
     yield ray
+
+
+@pytest.fixture(scope="session")
+def hopper_offline_data(ray_session, tmp_path_factory) -> Path:
+    """A tiny HopperShift dataset, built once per run for the tests that only read it
+    (tests/data, tests/algorithms/maple): 200 steps of uniform actions (`random`) and 200 of
+    an untrained SAC policy (`expert`) under each of the three dynamics."""
+    from rllib_asor.data.collect import collect
+
+    out = tmp_path_factory.mktemp("hopper-offline")
+    return collect(
+        "rllib_asor/HopperShift-v0",
+        out,
+        200,
+        qualities=("random", "expert"),
+        train_steps=0,
+        log=lambda *_: None,
+    )

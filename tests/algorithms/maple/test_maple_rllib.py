@@ -15,7 +15,6 @@ from ray.rllib.core.columns import Columns
 import rllib_asor
 from rllib_asor.algorithms.maple import learner as maple_learner
 from rllib_asor.algorithms.maple.settings import MapleSettings
-from rllib_asor.data.collect import collect
 
 ENV = "rllib_asor/HopperShift-v0"
 TINY = dict(
@@ -28,14 +27,10 @@ TINY = dict(
 
 
 @pytest.fixture(scope="module")
-def parts(ray_session, tmp_path_factory) -> list[str]:
+def parts(hopper_offline_data) -> list[str]:
     """200 steps of uniform actions under each of the three dynamics (+ the untrained policy's,
-    for the manifest's reference returns)."""
-    out = tmp_path_factory.mktemp("maple-data")
-    root = collect(
-        ENV, out, 200, qualities=("random", "expert"), train_steps=0, log=lambda *_: None
-    )
-    return [str(root / d / "random") for d in ("original", "body_mass", "density_10")]
+    for the manifest's reference returns; tests/conftest.py builds it once per run)."""
+    return [str(hopper_offline_data / d / "random") for d in ("original", "body_mass", "density_10")]
 
 
 def _config(parts: list[str], cache: Path, cls: type | None = None, **settings):
