@@ -1,14 +1,21 @@
 """The one wall around Ray/RLlib internals: every private Ray name rllib_asor uses is here.
 
-Written for Ray 2.60.0 (`RAY_VERSION`). Callers use the small functions below; none of them
-touches a name starting with `_` that Ray defines. `PRIVATE_NAMES` lists each private name read
+Written for Ray 2.60.0 (`RAY_VERSION`). Callers use the small functions below and touch no
+name starting with `_` that Ray defines. `PRIVATE_NAMES` lists each private name read
 or written here, with what we use it for; `OVERRIDES` lists the private methods our subclasses
 override (RLlib calls them; the overrides stay in their classes). `missing()` names the ones the
 installed Ray lacks (tests/rllib/test_compat.py fails on them), so a Ray upgrade breaks here,
-in one place, with one line.
+in one place, with one line. No module of the package still touches a private Ray name
+directly (tests, `studies/` and `benchmarks/` still read e.g. `learner_group._learner`).
+
+Where a public API does the job it is used instead: `Learner.module` / `.device`,
+`MultiRLModule.items()`, `AlgorithmConfig.rl_module(model_config=...)`,
+`Learner.filter_param_dict_for_optimizer`. `config.learner_class` and `config.rl_module_spec`
+are not such stand-ins: they fill in RLlib's defaults, and we need what the user set.
 
 It sits at the package's top, not in `rllib/`, because the layers below the glue use it too
-(`algorithms/`, `evaluation/`, `data/`, `registry/`, `cli/`); it imports nothing of ours, so
+(`algorithms/`, `evaluation/`, `data/`; tests/test_import_graph.py keeps `algorithms/` from
+importing `rllib_asor.rllib`) as well as `registry/` and `cli/`; it imports nothing of ours, so
 every layer may import it. `asor/` and `envs/` never do (no Ray there). Ray is imported lazily
 inside each function: importing this module costs nothing.
 """
