@@ -58,4 +58,7 @@ def test_env_modules_import_no_ray_torch_or_other_packages_of_ours(path: Path) -
             roots.add(node.module or "")
     ours = {r for r in roots if r.startswith("rllib_asor")}
     assert all(r.startswith("rllib_asor.envs") for r in ours), ours
-    assert {r.split(".")[0] for r in roots - ours} <= ALLOWED_ROOTS
+    # game_env.gl, the one module that imports MuJoCo without loading a GL library, is shared
+    # with the race package (which imports no ray or torch either); nothing else of game_env.
+    shared = {r for r in roots if r == "game_env.gl"}
+    assert {r.split(".")[0] for r in roots - ours - shared} <= ALLOWED_ROOTS
