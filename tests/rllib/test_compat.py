@@ -16,6 +16,7 @@ COMPAT = PACKAGE / "ray_compat.py"
 # Private RLlib names our package used directly before compat existed (and public stand-ins
 # replaced some of them: Learner.module, Learner.device, MultiRLModule.items(),
 # AlgorithmConfig.rl_module(model_config=...), Learner.filter_param_dict_for_optimizer).
+# Learner._module (now `.module`) is not listed: MAPLE's Algorithm has a method of that name.
 USED_BEFORE = {
     "_learner_class", "_rl_module_spec", "_env_to_module_connector", "_model_config",
     "_translate_special_keys", "_learner_connector", "_temp_losses", "_weights_seq_no",
@@ -65,12 +66,35 @@ def violations(path: Path, private: set[str], overrides: set[str], root: Path) -
     return out
 
 
+def unlisted_overrides(source: str, rllib_private: set[str]) -> list[str]:
+    """`line name` of each method a class in `source` defines that is one of `rllib_private`
+    and not in compat.OVERRIDES."""
+    listed = {p.name for p in compat.OVERRIDES}
+    return [
+        f"{fn.lineno} {fn.name}"
+        for cls in ast.walk(ast.parse(source))
+        if isinstance(cls, ast.ClassDef)
+        for fn in cls.body
+        if isinstance(fn, ast.FunctionDef) and fn.name in rllib_private - listed
+    ]
+
+
 def test_every_private_name_compat_relies_on_exists_in_the_installed_ray():
     gone = compat.missing()
     assert not gone, (
         f"Ray {ray.__version__} lacks {', '.join(gone)} (rllib_asor/ray_compat.py was "
         f"written for Ray {compat.RAY_VERSION})"
     )
+
+
+def test_a_name_gone_from_ray_is_reported(monkeypatch):
+    gone = compat.Private("ray.rllib.core.learner.learner:Learner", "_gone_in_a_new_ray", "x")
+    monkeypatch.setattr(compat, "PRIVATE_NAMES", (*compat.PRIVATE_NAMES, gone))
+    monkeypatch.setattr(compat, "TO_DICT_KEYS", {**compat.TO_DICT_KEYS, "x": "_no_such_key"})
+    assert compat.missing() == [
+        "ray.rllib.core.learner.learner:Learner._gone_in_a_new_ray",
+        "AlgorithmConfig.to_dict()['_no_such_key']",
+    ]
 
 
 def test_the_existence_check_can_fail():
@@ -106,15 +130,12 @@ def test_overrides_of_private_rllib_methods_are_listed_in_compat():
     rllib_private = {
         n for b in bases for n in dir(b) if n.startswith("_") and not n.startswith("__")
     }
-    listed = {p.name for p in compat.OVERRIDES}
-    unlisted = []
-    for path in sorted(PACKAGE.rglob("*.py")):
-        for cls in ast.walk(ast.parse(path.read_text())):
-            if not isinstance(cls, ast.ClassDef):
-                continue
-            for fn in cls.body:
-                if isinstance(fn, ast.FunctionDef) and fn.name in rllib_private - listed:
-                    unlisted.append(f"{path.relative_to(PACKAGE.parent)}:{fn.lineno} {fn.name}")
+    assert {"_update", "_get_tensor_variable", "_check_component"} <= rllib_private
+    unlisted = [
+        f"{path.relative_to(PACKAGE.parent)}:{line}"
+        for path in sorted(PACKAGE.rglob("*.py"))
+        for line in unlisted_overrides(path.read_text(), rllib_private)
+    ]
     assert not unlisted, "overrides of private RLlib methods not in compat.OVERRIDES: " + (
         "; ".join(unlisted)
     )
@@ -134,3 +155,16 @@ def test_the_scan_finds_an_access(tmp_path):
     found = violations(src, _private_names(), {p.name for p in compat.OVERRIDES}, tmp_path)
     names = sorted(f.split(" ")[1] for f in found)
     assert names == ["_global_registry", "_learner_class", "_learner_connector", "_update"]
+
+
+def test_the_override_check_finds_an_unlisted_one():
+    source = (
+        "class L:\n"
+        "    def _update(self):\n"
+        "        pass\n"
+        "    def _get_tensor_variable(self):\n"
+        "        pass\n"
+    )
+    assert unlisted_overrides(source, {"_update", "_get_tensor_variable"}) == [
+        "4 _get_tensor_variable"
+    ]
