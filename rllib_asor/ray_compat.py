@@ -104,6 +104,11 @@ PRIVATE_NAMES: tuple[Private, ...] = (
         "global_worker_stdstream_dispatcher",
         "the handlers of forwarded worker output, to filter harmless lines",
     ),
+    Private(
+        "ray._private.ray_logging:WorkerStandardStreamDispatcher",
+        "_lock",
+        "held while we swap the dispatcher's handlers",
+    ),
 )
 """Every private Ray name this module reads or writes, with what we use it for."""
 
