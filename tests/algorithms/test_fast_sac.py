@@ -181,10 +181,11 @@ def test_greedy_action_and_v_of_s_use_the_squashed_mean():
         assert torch.allclose(deterministic_sample(cls.from_logits(logits)), torch.tanh(logits[:, :2]))
     module = fast_off_policy(_sac()).get_rl_module_spec(env=gym.make("Pendulum-v1")).build()
     assert module.get_inference_action_dist_cls() is SquashedGaussian
-    obs = torch.randn(6, 3)
+    obs = torch.randn(6, 3, generator=torch.Generator().manual_seed(0))
     mu = module.pi(module.pi_encoder({Columns.OBS: obs})[ENCODER_OUT])[:, :1]
     expected = module.compute_q_values({Columns.OBS: obs, Columns.ACTIONS: torch.tanh(mu)})
-    assert torch.allclose(soft_q_state_values(module, {Columns.OBS: obs}), expected)
+    # atol: Q values near 0 from two float32 passes differ in the last bits
+    assert torch.allclose(soft_q_state_values(module, {Columns.OBS: obs}), expected, atol=1e-6)
 
 
 def test_fast_sac_trains_one_gradient_step_per_env_step_and_restores(ray_session, tmp_path):
