@@ -41,7 +41,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q --timeout=900 --durations=30
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks studies
+	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks studies mkdocs_hooks.py
 
 # The documentation site with the API reference (mkdocs.yml) in site/: any warning, a broken
 # link or a docstring that does not parse, fails it (tests/test_docs_build.py runs the same).
