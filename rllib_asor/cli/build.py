@@ -181,12 +181,11 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
             and not {"callbacks", "callbacks_class"} & set(exp.config)
         ):  # the family's metrics (race/...) unless the file names its own callbacks
             cfg.callbacks(family.metrics_callbacks())
-        if curriculum is not None:
-            from rllib_asor.algorithms.common.callbacks import add_callbacks
+        from rllib_asor.algorithms.common.callbacks import add_callbacks
 
+        if curriculum is not None:
             add_callbacks(cfg, curriculum)
         if exp.asor is None:  # with_asor's own metrics callback drops them for ASOR runs
-            from rllib_asor.algorithms.common.callbacks import add_callbacks
             from rllib_asor.rllib.callbacks import DropNaNLearnerStatsCallback
 
             add_callbacks(cfg, DropNaNLearnerStatsCallback)
