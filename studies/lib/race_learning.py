@@ -37,15 +37,7 @@ from studies.lib.common import (
     start_local_ray,
     write_json,
 )
-from studies.lib.lava_reproduction import parse_method
-
-DEFAULT_METHODS = (
-    "ppo",
-    "srpo:preset=paper,mode=srpo",
-    "asor-paper:preset=paper,mode=asor",
-    "asor:mode=asor",
-)
-"""PPO, the published SRPO and ASOR (`preset=paper`), and ASOR's robust default."""
+from studies.lib.lava_reproduction import DEFAULT_METHODS, parse_method
 
 
 def model_config_arg(text: str) -> str:
