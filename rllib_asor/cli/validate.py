@@ -167,13 +167,18 @@ def check_file(exp: Experiment, evaluation: bool = False) -> None:
     `--num-env-runners` replace any of them: what the real run would refuse is refused here
     too. Leaves `exp` as it was, but for numbers written as text (read as numbers).
     `evaluation`: the caller turns evaluation on (`evaluation/...` stop keys are reported)."""
+    _check_blocks(exp)
+    _check_config_points(exp, evaluation)
+
+
+def _check_blocks(exp: Experiment) -> None:
+    """The grids, checkpoint settings, algorithm and `asor:`/`escp:`/`maple:` blocks."""
     _check_grids(exp)
     _check_checkpoint_config(exp)
     algorithm_class(exp)
     validate_asor(exp)
     validate_escp(exp)
     validate_maple(exp)
-    _check_config_points(exp, evaluation)
 
 
 def _check_config_points(exp: Experiment, evaluation: bool = False) -> Any:
@@ -198,12 +203,7 @@ def _check_config_points(exp: Experiment, evaluation: bool = False) -> Any:
 def validate(exp: Experiment) -> Any:
     """Check everything that can be checked before Ray starts; return the first-point config."""
     check_offline_input(exp)
-    _check_grids(exp)
-    _check_checkpoint_config(exp)
-    algorithm_class(exp)
-    validate_asor(exp)
-    validate_escp(exp)
-    validate_maple(exp)
+    _check_blocks(exp)
     validate_env(exp)
     cfg = _check_config_points(exp)
     _check_env_runner(exp, cfg)
