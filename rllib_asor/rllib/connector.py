@@ -37,6 +37,7 @@ from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.encoding import flatten, select, select_space
 from rllib_asor.asor.proxy import ProxyInputs
 from rllib_asor.asor.update import AsorBatch, Chunk, asor_update, concat_batches
+from rllib_asor.devices import module_device
 from rllib_asor.rllib.modules import DYNAMICS_ID, LABEL, proxy_batch
 
 ValueFn = Callable[[Any, dict[str, Any]], torch.Tensor]
@@ -189,7 +190,7 @@ class AsorRewardConnector(ConnectorV2):
                 result.disc_labels,
             )
         else:  # the same update on every Learner, on all their rows (see `gather_batches`)
-            device = next(state.parameters()).device
+            device = module_device(state)
             shards = gather_batches(None if built is None else built[0], device)
             present = [b for b in shards if b is not None]
             if not present:
