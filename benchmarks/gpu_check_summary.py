@@ -2,8 +2,9 @@
 
     python -m benchmarks.gpu_check_summary benchmarks/out/gpu_check
 
-Reads OUT/gpu_tests.xml (pytest's junit report), OUT/mb256/scaling.json and
-OUT/mb2048/scaling.json (`benchmarks.scaling`); a missing file is a row that says so. The
+Reads OUT/gpu_tests.xml (pytest's junit report), OUT/e2e/scaling.json (sampling and end to
+end) and OUT/learner/scaling.json (the Learner alone), both from `benchmarks.scaling` at
+minibatch 2,048; a missing file is a row that says so. The
 targets are those for a 16-core node with one GPU: PPO+ASOR end to end at the most runners
 ≥ 8× its 1-runner rate, the GPU Learner alone ≥ 10,000 env steps/s, PPO+ASOR ≥ 0.9× PPO at
 the most runners. On a CPU they are shown, not judged.
@@ -48,26 +49,33 @@ def fmt(x: float | None, digits: int = 0) -> str:
     return "—" if x is None else f"{x:,.{digits}f}"
 
 
-def targets(mb256: dict[str, Any] | None, mb2048: dict[str, Any] | None) -> list[list[str]]:
+def targets(e2e: dict[str, Any] | None, learner: dict[str, Any] | None) -> list[list[str]]:
     """Rows (check, measured, target, verdict) of the GPU node's targets."""
-    counts = sorted({r["runners"] for r in (mb256 or {}).get("rows", [])})
-    cuda = (mb256 or {}).get("settings", {}).get("device") == "cuda"
+    counts = sorted({r["runners"] for r in (e2e or {}).get("rows", [])})
+    cuda = (e2e or learner or {}).get("settings", {}).get("device") == "cuda"
     rows = []
     if counts:
         lo, hi = counts[0], counts[-1]
-        one, many = rate(mb256, "asor", lo, "e2e"), rate(mb256, "asor", hi, "e2e")
+        one, many = rate(e2e, "asor", lo, "e2e"), rate(e2e, "asor", hi, "e2e")
         ratio = many / one if one and many else None
-        ppo = rate(mb256, "ppo", hi, "e2e")
+        ppo = rate(e2e, "ppo", hi, "e2e")
         rel = many / ppo if many and ppo else None
         learners = [
             row["learner"]
-            for res in (mb256, mb2048)
+            for res in (e2e, learner)
             for row in (res or {}).get("rows", [])
             if isinstance(row.get("learner"), float)
         ]
         best = max(learners, default=None)
         rows = [
-            [f"PPO+ASOR end to end, {hi} ÷ {lo} runners", fmt(ratio, 2), "≥ 8", ratio, 8.0],
+            # the target is against one runner: another base is shown, not judged
+            [
+                f"PPO+ASOR end to end, {hi} ÷ {lo} runners",
+                fmt(ratio, 2),
+                "≥ 8 (÷ 1 runner)",
+                ratio if lo == 1 else None,
+                8.0,
+            ],
             ["Learner alone, best (env steps/s)", fmt(best), "≥ 10,000", best, 10_000.0],
             [f"PPO+ASOR ÷ PPO end to end, {hi} runners", fmt(rel, 2), "≥ 0.9", rel, 0.9],
         ]
@@ -85,12 +93,12 @@ def targets(mb256: dict[str, Any] | None, mb2048: dict[str, Any] | None) -> list
 
 def main(argv: list[str] | None = None) -> int:
     out = Path((argv if argv is not None else sys.argv[1:])[0])
-    mb256, mb2048 = load(out / "mb256" / "scaling.json"), load(out / "mb2048" / "scaling.json")
+    e2e, learner = load(out / "e2e" / "scaling.json"), load(out / "learner" / "scaling.json")
     lines = ["", "| check | measured | target | verdict |", "|---|---|---|---|"]
     lines.append(
         f"| gpu tests (`pytest -m gpu`) | {test_counts(out / 'gpu_tests.xml')} | all pass | |"
     )
-    for name, res in (("minibatch 256", mb256), ("minibatch 2048", mb2048)):
+    for name, res in (("sampling and end to end", e2e), ("Learner alone", learner)):
         if res is None:
             lines.append(f"| scaling benchmark, {name} | no result (see its log) | | |")
             continue
@@ -116,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
             lines.append(
                 f"| note | {name}: stopped by its time limit; what it measured is above | | |"
             )
-    for check, shown, target, verdict in targets(mb256, mb2048):
+    for check, shown, target, verdict in targets(e2e, learner):
         lines.append(f"| {check} | {shown} | {target} | {verdict} |")
     print("\n".join(lines))
     return 0

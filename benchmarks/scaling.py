@@ -169,7 +169,8 @@ def race_config(algo: str, args: argparse.Namespace, runners: int, seed: int = 0
         )
         .training(
             train_batch_size=args.rows_per_runner * runners,
-            minibatch_size=args.minibatch,
+            # RLlib refuses a minibatch larger than the batch (1 runner at --minibatch 2048)
+            minibatch_size=min(args.minibatch, args.rows_per_runner * runners),
             num_epochs=args.epochs,
             lr=[[0, 0.001], [2_000_000, 0.0003]],
             gamma=0.99,
@@ -245,7 +246,7 @@ def measure_learner(
                 episodes=episodes,
                 timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: lifetime},
                 num_epochs=args.epochs,
-                minibatch_size=args.minibatch,
+                minibatch_size=min(args.minibatch, args.rows_per_runner * runners),
                 shuffle_batch_per_epoch=True,
             )
             if cuda:
@@ -255,7 +256,8 @@ def measure_learner(
                 cpu_times.append(time.process_time() - c0)
                 steps.append(n)
     device = str(next(learner.module[next(iter(learner.module.keys()))].parameters()).device)
-    minibatches = -(-args.epochs * args.rows_per_runner * runners // args.minibatch)
+    rows = args.rows_per_runner * runners
+    minibatches = -(-args.epochs * rows // min(args.minibatch, rows))
     return {
         "env_steps_per_s": sum(steps) / sum(times),
         # Per second of this process's CPU time: on a CPU Learner with one torch thread, what

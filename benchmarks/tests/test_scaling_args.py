@@ -75,12 +75,12 @@ def test_test_counts_read_pytests_junit_report(tmp_path: Path) -> None:
 
 
 def test_summary_says_what_is_missing(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    (tmp_path / "mb256").mkdir()
+    (tmp_path / "e2e").mkdir()
     e2e = {("ppo", 1): 300.0, ("asor", 1): 250.0}
-    (tmp_path / "mb256" / "scaling.json").write_text(json.dumps(scaling_json("cpu", e2e, 500.0)))
+    (tmp_path / "e2e" / "scaling.json").write_text(json.dumps(scaling_json("cpu", e2e, 500.0)))
     assert summary.main([str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "| scaling benchmark, minibatch 2048 | no result (see its log) |" in out
+    assert "| scaling benchmark, Learner alone | no result (see its log) |" in out
     assert "| PPO+ASOR, 1 runner(s) (env steps/s) | e2e 250; learner 500 |" in out
 
 
