@@ -10,12 +10,17 @@ weights), so the difference ``d_s = treatment_s - baseline_s`` cancels the seed'
   (`rliable.metrics`, Agarwal et al. 2021), over the paired runs;
 - pairs needed for the observed effect at 80 % power, two-sided 5 %:
   n ≈ ((z₀.₉₇₅ + z₀.₈) · sd(d) / mean(d))².
+
+The studies' tables (studies/lib) take their numbers from here too: `unpaired_difference` (every
+run, seeds pooled: percentile bootstrap of the difference of means and a one-sided Mann–Whitney
+U) and `other_intervals` (the paired percentile bootstrap, the paired t-interval and the
+unpaired interval, to show that a verdict does not hang on the choice of interval).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -159,3 +164,88 @@ def paired_difference(
     )
     result.verdict, result.pairs_needed = _verdict(result)
     return result
+
+
+def _std(x: np.ndarray) -> float:
+    return float(x.std(ddof=1)) if len(x) > 1 else 0.0
+
+
+def unpaired_difference(
+    baseline: Sequence[float],
+    treatment: Sequence[float],
+    *,
+    n_resamples: int = 9999,
+    seed: int = 0,
+) -> dict[str, float]:
+    """Every run, seeds pooled: mean/std of both samples, diff = mean(treatment) −
+    mean(baseline), its 95% percentile bootstrap interval (`ci_low`, `ci_high`; both samples
+    resampled independently) and the one-sided Mann–Whitney U p-value for treatment > baseline.
+
+    A constant sample (n = 1 included) has a degenerate bootstrap distribution, so only the
+    other one is resampled; two constant samples give [diff, diff]; all values tied gives p = 1.
+    ValueError when a sample is empty.
+    """
+    from scipy.stats import bootstrap, mannwhitneyu
+
+    x, y = np.asarray(baseline, dtype=float), np.asarray(treatment, dtype=float)
+    if len(x) == 0 or len(y) == 0:
+        raise ValueError("an unpaired comparison needs at least one value in each sample")
+    diff = float(y.mean() - x.mean())
+    const_x, const_y = bool(np.all(x == x[0])), bool(np.all(y == y[0]))
+    if const_x and const_y:
+        lo = hi = diff
+    else:
+        if const_x or const_y:  # resample the varying sample only, shifted by the constant
+            data, sign, shift = ((y,), 1.0, -x[0]) if const_x else ((x,), -1.0, y[0])
+
+            def stat(*s: np.ndarray, axis: int = -1) -> np.ndarray:
+                return shift + sign * s[0].mean(axis=axis)
+        else:
+            data = (x, y)
+
+            def stat(*s: np.ndarray, axis: int = -1) -> np.ndarray:
+                return s[1].mean(axis=axis) - s[0].mean(axis=axis)
+
+        res = bootstrap(
+            data, stat, vectorized=True, paired=False, method="percentile",
+            n_resamples=n_resamples, rng=np.random.default_rng(seed),
+        )  # fmt: skip
+        lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    if np.all(np.concatenate([x, y]) == x[0]):
+        p = 1.0
+    else:
+        p = float(mannwhitneyu(y, x, alternative="greater").pvalue)
+    return {
+        "n_baseline": len(x),
+        "mean_baseline": float(x.mean()),
+        "std_baseline": _std(x),
+        "n_treatment": len(y),
+        "mean_treatment": float(y.mean()),
+        "std_treatment": _std(y),
+        "diff": diff,
+        "ci_low": lo,
+        "ci_high": hi,
+        "p_value": p,
+    }
+
+
+def other_intervals(
+    baseline: Mapping[Any, float], treatment: Mapping[Any, float]
+) -> dict[str, tuple[float, float]]:
+    """95 % intervals of (treatment − baseline) other than the BCa one `paired_difference`
+    decides by: ``paired_percentile`` (bootstrap of the per-seed differences, seeded),
+    ``paired_t`` (t-interval of their mean) and ``unpaired`` (`unpaired_difference`, every run)."""
+    from scipy import stats
+
+    seeds = sorted(set(baseline) & set(treatment), key=str)
+    d = np.array([treatment[s] - baseline[s] for s in seeds])
+    pct = stats.bootstrap(
+        (d,), np.mean, method="percentile", rng=np.random.default_rng(0)
+    ).confidence_interval
+    t = stats.t.interval(0.95, len(d) - 1, loc=d.mean(), scale=stats.sem(d))
+    c = unpaired_difference(list(baseline.values()), list(treatment.values()))
+    return {
+        "paired_percentile": (float(pct.low), float(pct.high)),
+        "paired_t": (float(t[0]), float(t[1])),
+        "unpaired": (c["ci_low"], c["ci_high"]),
+    }

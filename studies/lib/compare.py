@@ -1,5 +1,7 @@
 """Compare methods on one per-run metric: mean ± std, Δ vs a baseline with a 95% bootstrap CI,
 and a one-sided Mann–Whitney U p-value for "method > baseline" (unpaired, seeds pooled).
+The statistics are `rllib_asor.report.paired`'s (`unpaired_difference`, `paired_difference`,
+the numbers `rllib compare` prints); this module reads run files and writes the tables.
 
     python -m studies.lib.compare --runs studies/out/lava --metric greedy_return_mean \\
         --baseline ppo --methods asor asor-paper [--out table.md] [--paired]
@@ -26,70 +28,11 @@ from typing import Any
 
 import numpy as np
 
+from rllib_asor.report.paired import paired_difference, unpaired_difference
+
 
 def _std(x: np.ndarray) -> float:
     return float(x.std(ddof=1)) if len(x) > 1 else 0.0
-
-
-def compare(
-    baseline: Sequence[float],
-    treatment: Sequence[float],
-    *,
-    n_resamples: int = 9999,
-    seed: int = 0,
-) -> dict[str, float]:
-    """Mean/std of both samples, diff = mean(treatment) − mean(baseline), its 95% percentile
-    bootstrap CI (`ci_low`, `ci_high`; independent resampling of both samples) and the
-    one-sided Mann–Whitney U p-value for treatment > baseline (`p_value`).
-
-    A constant sample (including n = 1) has a degenerate bootstrap distribution, so only the
-    other one is resampled; two constant samples give [diff, diff]; all values tied gives p = 1.
-    """
-    from scipy.stats import bootstrap, mannwhitneyu
-
-    x, y = np.asarray(baseline, dtype=float), np.asarray(treatment, dtype=float)
-    if len(x) == 0 or len(y) == 0:
-        raise ValueError("compare needs at least one value in each sample")
-    diff = float(y.mean() - x.mean())
-    const_x, const_y = bool(np.all(x == x[0])), bool(np.all(y == y[0]))
-    if const_x and const_y:
-        lo = hi = diff
-    else:
-        if const_x or const_y:  # resample the varying sample only, shifted by the constant
-            data, sign, shift = ((y,), 1.0, -x[0]) if const_x else ((x,), -1.0, y[0])
-
-            def stat(*s: np.ndarray, axis: int = -1) -> np.ndarray:
-                return shift + sign * s[0].mean(axis=axis)
-        else:
-            data = (x, y)
-
-            def stat(*s: np.ndarray, axis: int = -1) -> np.ndarray:
-                return s[1].mean(axis=axis) - s[0].mean(axis=axis)
-
-        kwargs: dict[str, Any] = dict(
-            vectorized=True, paired=False, method="percentile", n_resamples=n_resamples
-        )
-        try:
-            res = bootstrap(data, stat, rng=np.random.default_rng(seed), **kwargs)
-        except TypeError:  # scipy < 1.15 has no `rng`
-            res = bootstrap(data, stat, random_state=np.random.default_rng(seed), **kwargs)
-        lo, hi = float(res.confidence_interval.low), float(res.confidence_interval.high)
-    if np.all(np.concatenate([x, y]) == x[0]):
-        p = 1.0
-    else:
-        p = float(mannwhitneyu(y, x, alternative="greater").pvalue)
-    return {
-        "n_baseline": len(x),
-        "mean_baseline": float(x.mean()),
-        "std_baseline": _std(x),
-        "n_treatment": len(y),
-        "mean_treatment": float(y.mean()),
-        "std_treatment": _std(y),
-        "diff": diff,
-        "ci_low": lo,
-        "ci_high": hi,
-        "p_value": p,
-    }
 
 
 def compare_paired(baseline: dict[Any, float], treatment: dict[Any, float]) -> dict[str, float]:
@@ -97,8 +40,6 @@ def compare_paired(baseline: dict[Any, float], treatment: dict[Any, float]) -> d
     its 95% interval over seeds (the project's BCa interval of a mean; NaN for one pair), and
     the one-sided Wilcoxon signed-rank p for treatment > baseline (1 when every difference is
     0). The numbers are `rllib compare`'s (`rllib_asor.report.paired.paired_difference`)."""
-    from rllib_asor.report.paired import paired_difference
-
     if not set(baseline) & set(treatment):
         raise ValueError("compare_paired needs at least one seed run by both methods")
     r = paired_difference(baseline, treatment, alternative="greater")
@@ -183,7 +124,7 @@ def table(values: dict[str, list[float]], baseline: str, methods: Sequence[str])
             y = np.asarray(ys)
             lines.append(f"| {name} | {len(y)} | {y.mean():.3f} ± {_std(y):.3f} | – | – | – |")
             continue
-        c = compare(base, ys)
+        c = unpaired_difference(base, ys)
         lines.append(
             f"| {name} | {c['n_treatment']} | {c['mean_treatment']:.3f} ± "
             f"{c['std_treatment']:.3f} | {c['diff']:+.3f} | [{c['ci_low']:+.3f}, "

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from rllib_asor.report.paired import other_intervals
 from studies.lib import compare as cmp
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -109,19 +110,12 @@ def race_speed_table(path: Path, spec: dict[str, Any]) -> str:
 
 def _other_intervals(base: dict[Any, float], mine: dict[Any, float]) -> str:
     """The paired percentile bootstrap, the paired t-interval and the unpaired percentile
-    bootstrap of (method − baseline), 95 %, seeded."""
-    from scipy import stats
-
-    seeds = sorted(set(base) & set(mine), key=str)
-    d = np.array([mine[s] - base[s] for s in seeds])
-    rng = np.random.default_rng(0)
-    pct = stats.bootstrap((d,), np.mean, method="percentile", random_state=rng).confidence_interval
-    t = stats.t.interval(0.95, len(d) - 1, loc=d.mean(), scale=stats.sem(d))
-    c = cmp.compare(list(base.values()), list(mine.values()))
+    bootstrap of (method − baseline), 95 %, seeded (`rllib_asor.report.paired.other_intervals`)."""
+    i = other_intervals(base, mine)
+    (pl, ph), (tl, th), (ul, uh) = i["paired_percentile"], i["paired_t"], i["unpaired"]
     return (
-        f"paired percentile [{pct.low:+.3f}, {pct.high:+.3f}], paired t [{t[0]:+.3f}, "
-        f"{t[1]:+.3f}], unpaired ({len(base)} vs {len(mine)}) [{c['ci_low']:+.3f}, "
-        f"{c['ci_high']:+.3f}]"
+        f"paired percentile [{pl:+.3f}, {ph:+.3f}], paired t [{tl:+.3f}, {th:+.3f}], "
+        f"unpaired ({len(base)} vs {len(mine)}) [{ul:+.3f}, {uh:+.3f}]"
     )
 
 

@@ -1,4 +1,4 @@
-"""studies.lib.compare: bootstrap CI of Δ, one-sided Mann–Whitney p, and the table CLI."""
+"""studies.lib.compare: its tables and CLI, on the statistics of rllib_asor.report.paired (the\nunpaired bootstrap CI of Δ and one-sided Mann–Whitney p, the paired BCa interval)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from rllib_asor.report.paired import unpaired_difference as compare
 from rllib_asor.report.stats import bootstrap_ci
-from studies.lib.compare import compare, compare_paired, main, metric_value
+from studies.lib.compare import compare_paired, main, metric_value
 
 
 def test_clearly_better_treatment() -> None:
