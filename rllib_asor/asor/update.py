@@ -158,6 +158,8 @@ class AsorResult:
     disc_labels: torch.Tensor
     """[M] 1 for D_P, 0 for D_Q."""
     metrics: dict[str, float] = field(default_factory=dict)
+    lam: float = 0.0
+    """λ as applied: scaled, 0 when inactive, capped (what multiplies the bonus)."""
 
 
 @torch.no_grad()
@@ -211,11 +213,8 @@ def asor_update(
     logits = state.disc(feats)
 
     # 5. The bonus b(s) (with potential shaping, b is the potential Φ).
-    def raw_bonus(x: torch.Tensor) -> torch.Tensor:
-        return reward_bonus(x, cfg.reward_form, cfg.log_omega_min, cfg.logit_clip)
-
-    raw = raw_bonus(logits)
-    normalise = _bonus_normaliser(cfg, state, raw)
+    raw = _raw_bonus(cfg, logits)
+    normalise = _bonus_normaliser(cfg, state, raw, update_running=True)
     bonus = potential_of = normalise(raw)
     potential = cfg.shaping == "potential"
     if potential and (batch.next_features is None or batch.terminateds is None):
@@ -225,7 +224,7 @@ def asor_update(
         )
         potential = False
     if potential:
-        next_bonus = normalise(raw_bonus(state.disc(batch.next_features)))
+        next_bonus = normalise(_raw_bonus(cfg, state.disc(batch.next_features)))
         bonus = potential_shaping(bonus, next_bonus, batch.terminateds, batch.gamma)
     # 6. λ for this batch ("auto": from the discriminator's JS estimate on its own batch).
     js = float("nan")
@@ -265,17 +264,48 @@ def asor_update(
         )
         if ev is not None:  # no episode chunks (off-policy, offline): absent, never NaN
             metrics["critic_ev"] = ev
-    return AsorResult(delta, disc_feats, labels, metrics)
+    return AsorResult(delta, disc_feats, labels, metrics, lam_eff)
+
+
+@torch.no_grad()
+def bonus_for_rows(
+    cfg: AsorConfig,
+    state: AsorState,
+    lam: float,
+    features: torch.Tensor,
+    next_features: torch.Tensor,
+    terminateds: torch.Tensor,
+    gamma: float,
+) -> torch.Tensor:
+    """λ·b(s) (or λ·(γ·b(s′) − b(s))) for rows that were not ranked, e.g. MAPLE's model rows,
+    after `asor_update` on the ranked ones: the same bonus form, normalisation and shaping,
+    with the discriminator and running statistics as that update left them (not updated
+    again; `bonus_norm="batch"` takes these rows' own statistics). `lam` is `AsorResult.lam`."""
+    raw = _raw_bonus(cfg, state.disc(features))
+    normalise = _bonus_normaliser(cfg, state, raw, update_running=False)
+    bonus = normalise(raw)
+    if cfg.shaping == "potential":
+        next_bonus = normalise(_raw_bonus(cfg, state.disc(next_features)))
+        bonus = potential_shaping(bonus, next_bonus, terminateds, gamma)
+    return lam * bonus
+
+
+def _raw_bonus(cfg: AsorConfig, logits: torch.Tensor) -> torch.Tensor:
+    """The bonus form of the discriminator's logits, before normalising."""
+    return reward_bonus(logits, cfg.reward_form, cfg.log_omega_min, cfg.logit_clip)
 
 
 def _bonus_normaliser(
-    cfg: AsorConfig, state: AsorState, raw: torch.Tensor
+    cfg: AsorConfig, state: AsorState, raw: torch.Tensor, *, update_running: bool
 ) -> Callable[[torch.Tensor], torch.Tensor]:
-    """The map raw bonus → the bonus used, fixed for this batch (s and s′ alike)."""
+    """The map raw bonus → the bonus used, fixed for this batch (s and s′ alike); the only
+    place the bonus is normalised. `update_running`: fold `raw` into the running statistics
+    first (`bonus_norm="running"`)."""
     if cfg.bonus_norm == "off":
         return lambda b: b
     if cfg.bonus_norm == "running":
-        state.bonus_rms.update(raw.reshape(-1, 1))
+        if update_running:
+            state.bonus_rms.update(raw.reshape(-1, 1))
         mean, var = state.bonus_rms.mean.reshape(()), state.bonus_rms.var.reshape(())
     else:  # "batch"
         mean, var = raw.mean(), raw.var(unbiased=False)

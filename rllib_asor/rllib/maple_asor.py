@@ -25,8 +25,14 @@ from rllib_asor.algorithms.maple.learner import BONUS, MapleTorchLearner
 from rllib_asor.algorithms.maple.losses import state_values
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.proxy import ProxyInputs, VisitationProxy
-from rllib_asor.asor.reward import potential_shaping, reward_bonus, standardize
-from rllib_asor.asor.update import AsorBatch, AsorResult, AsorState, asor_update, concat_batches
+from rllib_asor.asor.update import (
+    AsorBatch,
+    AsorResult,
+    AsorState,
+    asor_update,
+    bonus_for_rows,
+    concat_batches,
+)
 from rllib_asor.rllib.connector import even_share, even_share_inputs, gather_batches, rank_and_size
 from rllib_asor.rllib.learners import AsorLearnerMixin
 from rllib_asor.rllib.modules import LABEL, proxy_batch
@@ -49,31 +55,15 @@ def maple_asor_bonus(
     `next_obs`, `terminateds`, `valid` are the SAC batch's steps; padding (`valid` False) gets 0
     and stays out of the batch statistics."""
     result = asor_update(cfg, state, proxy, real, rng)
-    lam = float(result.metrics.get("lambda", 0.0))
-    lead = obs.shape[:-1]
-    with torch.no_grad():
-        mask = valid.reshape(-1).bool()  # the discriminator sees the valid steps only
-        flat = obs.reshape(-1, obs.shape[-1])[mask]
-        flat_next = next_obs.reshape(-1, obs.shape[-1])[mask]
-
-        def raw(x: torch.Tensor) -> torch.Tensor:
-            return reward_bonus(state.disc(x), cfg.reward_form, cfg.log_omega_min, cfg.logit_clip)
-
-        b = raw(flat)
-        if cfg.bonus_norm == "running":
-            mean, var = state.bonus_rms.mean.reshape(()), state.bonus_rms.var.reshape(())
-        elif cfg.bonus_norm == "batch":
-            mean, var = b.mean(), b.var(unbiased=False)
-        if cfg.bonus_norm != "off":
-            b = standardize(b, mean, var, cfg.bonus_clip)
-        if cfg.shaping == "potential":
-            nb = raw(flat_next)
-            if cfg.bonus_norm != "off":
-                nb = standardize(nb, mean, var, cfg.bonus_clip)
-            b = potential_shaping(b, nb, terminateds.reshape(-1)[mask], real.gamma)
-        delta = torch.zeros(mask.shape, dtype=b.dtype, device=b.device)
-        delta[mask] = lam * b
-        delta = delta.reshape(lead)
+    mask = valid.reshape(-1).bool()  # the discriminator sees the valid steps only
+    flat = obs.reshape(-1, obs.shape[-1])[mask]
+    flat_next = next_obs.reshape(-1, obs.shape[-1])[mask]
+    b = bonus_for_rows(
+        cfg, state, result.lam, flat, flat_next, terminateds.reshape(-1)[mask], real.gamma
+    )
+    delta = torch.zeros(mask.shape, dtype=b.dtype, device=b.device)
+    delta[mask] = b
+    delta = delta.reshape(obs.shape[:-1])
     if not torch.isfinite(delta).all():
         raise ValueError("ASOR on MAPLE: the reward bonus is NaN/inf")
     return delta, result

@@ -184,7 +184,7 @@ def test_a_feature_of_zero_variance_normalises_to_the_clip_not_nan():
 def test_the_batch_normaliser_standardises_the_bonus_by_its_population_std():
     cfg = SimpleNamespace(bonus_norm="batch", bonus_clip=100.0)
     raw = torch.tensor([1.0, 3.0])  # mean 2, population std 1
-    f = update._bonus_normaliser(cfg, SimpleNamespace(), raw)
+    f = update._bonus_normaliser(cfg, SimpleNamespace(), raw, update_running=True)
     assert f(raw).tolist() == pytest.approx([-1.0, 1.0], abs=1e-6)
     assert f(torch.tensor([4.0])).tolist() == pytest.approx([2.0], abs=1e-6)
 
