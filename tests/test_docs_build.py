@@ -5,7 +5,6 @@ into a failed build."""
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import subprocess
 import sys
 from pathlib import Path
@@ -38,8 +37,8 @@ def test_the_site_builds_strict_with_every_public_name_documented(tmp_path: Path
     assert (site / "api" / "index.html").exists() and (site / "index.html").exists()
     assert "rllib_asor.rllib.wiring.with_asor" in pages["with_asor"]
     assert "Raises ValueError" in pages["with_asor"]  # the docstring, not only the signature
-    for field in dataclasses.fields(AsorConfig):  # every setting with its own entry
-        assert f'id="rllib_asor.asor.config.AsorConfig.{field.name}"' in pages["asor_config"]
+    for name in AsorConfig.model_fields:  # every setting with its own entry
+        assert f'id="rllib_asor.asor.config.AsorConfig.{name}"' in pages["asor_config"]
     assert 'id="rllib_asor.algorithms.escp.config.EscpConfig"' in pages["escp"]
     for name in ("MapleConfig", "MopoConfig"):
         assert f'id="rllib_asor.algorithms.maple.maple.{name}"' in pages["maple"]

@@ -1,0 +1,96 @@
+"""`Settings`: the pydantic base our settings blocks are declared with (`AsorConfig`, ESCP's
+and MAPLE's settings).
+
+A block is declared once, as typed fields with attribute docstrings: pydantic validates it
+(strict types, finite numbers, unknown keys refused), the docstrings are the fields'
+descriptions, and `model_json_schema()` is its JSON Schema. Each field's type carries an
+`Allowed` text, so a bad value is refused in one line naming the key, the value and what is
+allowed: `asor.rho_value=1.5 is invalid: allowed a number in (0, 1]`.
+"""
+
+from __future__ import annotations
+
+import difflib
+import typing
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+
+@dataclass(frozen=True)
+class Allowed:
+    """What a field takes, in words, for its error message (`Annotated` metadata):
+    `Annotated[float, Field(gt=0), Allowed("a number > 0")]`."""
+
+    text: str
+
+
+class Settings(BaseModel):
+    """Base of a settings block; `block` names it in messages (`asor`, `escp`, `maple`)."""
+
+    model_config = ConfigDict(
+        strict=True, allow_inf_nan=False, extra="forbid", use_attribute_docstrings=True
+    )
+    block: ClassVar[str] = "settings"
+    label: ClassVar[str] = "a"
+    """`escp.windw is not <label> setting`."""
+
+    def __init__(self, /, **data: Any) -> None:
+        try:
+            super().__init__(**data)
+        except ValidationError as e:
+            raise ValueError(type(self).one_line(e, data)) from None
+
+    @classmethod
+    def one_line(cls, error: ValidationError, data: dict[str, Any]) -> str:
+        """The first problem of `error` in one line: unknown keys, or the bad key, its value
+        and the field's `Allowed` text, or a cross-field check's own message."""
+        problems = error.errors()
+        unknown = [str(p["loc"][0]) for p in problems if p["type"] == "extra_forbidden"]
+        if unknown:
+            return cls.unknown_keys(unknown)
+        first = problems[0]
+        if not first["loc"]:  # a check across fields raised its own message
+            return str(first.get("ctx", {}).get("error", first["msg"]))
+        key = str(first["loc"][0])
+        return f"{cls.block}.{key}={data.get(key)!r} is invalid: allowed {cls.allowed(key)}"
+
+    @classmethod
+    def unknown_keys(cls, unknown: Sequence[str]) -> str:
+        """`escp.windw is not an ESCP setting (did you mean ...?): allowed a, b, ...`."""
+        names = list(cls.model_fields)
+        key = unknown[0]
+        close = difflib.get_close_matches(key, names, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        return f"{cls.block}.{key} is not {cls.label} setting{hint}: allowed {', '.join(names)}"
+
+    @classmethod
+    def allowed(cls, key: str) -> str:
+        """The `Allowed` text of field `key` (from its metadata or its annotation)."""
+        info = cls.model_fields[key]
+        found = _allowed_in([*info.metadata, info.annotation])
+        return found or str(info.annotation)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-dict form (what RLlib configs store and `from_dict` reads back)."""
+        return self.model_dump()
+
+
+def _allowed_in(items: Sequence[Any]) -> str | None:
+    for item in items:
+        if isinstance(item, Allowed):
+            return item.text
+        found = _allowed_in([*getattr(item, "__metadata__", ()), *typing.get_args(item)])
+        if found:
+            return found
+    return None
+
+
+def field_docs(model: type[BaseModel]) -> dict[str, str]:
+    """Each field's description (its attribute docstring) on one line of single spaces."""
+    return {
+        name: " ".join((info.description or "").split())
+        for name, info in model.model_fields.items()
+    }
