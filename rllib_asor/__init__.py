@@ -1,28 +1,25 @@
 """rllib-asor: ASOR (ICML 2025) as an add-on for Ray RLlib's new API stack.
 
 `rllib_asor.with_asor(algo_config, **settings)` switches ASOR on for an RLlib config;
-`rllib_asor.AsorConfig` holds the settings; `rllib_asor.FastSACConfig` is SAC on our fast
-off-policy path (a choice for both arms: `with_asor` never changes the base algorithm);
-`rllib_asor.asor` is the method itself (torch + numpy, no ray). Importing the package registers
-our gymnasium ids (`rllib_asor/LavaWorld-v0`, ...; entry points only, nothing heavy);
-everything else is imported lazily.
+`rllib_asor.AsorConfig` holds the settings; `rllib_asor.asor` is the method itself (torch +
+numpy, no ray). Importing the package registers our gymnasium ids (`rllib_asor/LavaWorld-v0`,
+...; entry points only, nothing heavy); everything else is imported lazily.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from rllib_asor.registry.envs import register_envs
+from rllib_asor.envs.registration import register_envs
 
 register_envs()
 
 if TYPE_CHECKING:
     from rllib_asor.algorithms.escp.config import EscpConfig
     from rllib_asor.algorithms.maple.maple import MapleConfig, MopoConfig
-    from rllib_asor.algorithms.sac.config import FastSACConfig
     from rllib_asor.asor.config import AsorConfig
 
-__all__ = ["AsorConfig", "EscpConfig", "FastSACConfig", "MapleConfig", "MopoConfig", "with_asor"]
+__all__ = ["AsorConfig", "EscpConfig", "MapleConfig", "MopoConfig", "with_asor"]
 __version__ = "0.1.0"
 
 
@@ -61,8 +58,4 @@ def __getattr__(name: str) -> Any:
         from rllib_asor.algorithms.escp.config import EscpConfig
 
         return EscpConfig
-    if name == "FastSACConfig":  # SAC on the fast off-policy path, imported on first use
-        from rllib_asor.algorithms.sac.config import FastSACConfig
-
-        return FastSACConfig
     raise AttributeError(f"module 'rllib_asor' has no attribute {name!r}")
