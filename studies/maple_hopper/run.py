@@ -74,7 +74,10 @@ def maple_config(method: str, dataset: str, seed: int, args: argparse.Namespace)
         "ensemble_cache": args.ensemble_cache,
         "ensemble_max_epochs": args.ensemble_max_epochs,
         "checkpoint_model_pool": True,  # the partial saves resume with the run's own pool
+        "ensemble": "tf_maple",  # what this study ran (7 / 5 / 200; the default is now 20 / 14 / 256)
     }
+    if method == "mopo":  # what this study ran (MOPO's own hopper-medium setting is h 5, λ 5)
+        settings.update(horizon=5, penalty_coef=1.0)
     config = (
         cls()
         .environment(ENV_ID, env_config={"dynamics": "original"})

@@ -58,7 +58,12 @@ from rllib_asor.algorithms.maple.segments import (
     episode_hiddens,
     mixed_batch,
 )
-from rllib_asor.algorithms.maple.settings import MOPO_DEFAULTS, MapleSettings
+from rllib_asor.algorithms.maple.settings import (
+    MOPO_DEFAULTS,
+    MapleSettings,
+    expand_ensemble,
+    mopo_dataset_settings,
+)
 from rllib_asor.algorithms.maple.termination import termination_fn
 
 logger = logging.getLogger(__name__)
@@ -94,8 +99,9 @@ class MapleConfig(AlgorithmConfig):
         self.min_train_timesteps_per_iteration = 0
 
     def maple(self, **settings: Any) -> MapleConfig:
-        """Set MAPLE settings (merged into the current ones, validated at once)."""
-        merged = {**self.maple_settings, **settings}
+        """Set MAPLE settings (merged into the current ones, validated at once; an
+        `ensemble` preset name is expanded first)."""
+        merged = {**self.maple_settings, **expand_ensemble(settings)}
         self.maple_settings = MapleSettings.from_dict(merged).to_dict()
         return self
 
@@ -145,11 +151,41 @@ class MapleConfig(AlgorithmConfig):
 
 
 class MopoConfig(MapleConfig):
-    """MOPO: MAPLE with the context switched off (no GRU; h 5, λ_u 1, MOPO's Hopper setting)."""
+    """MOPO: MAPLE with the context switched off (no GRU). h and λ_u are MOPO's own for the
+    dataset (`settings.MOPO_DATASETS`, e.g. hopper medium: h 5, λ 5) unless set here; h 5,
+    λ 1 for data MOPO has no setting for."""
 
     def __init__(self, algo_class: type | None = None) -> None:
         super().__init__(algo_class=algo_class or MOPO)
         self.maple(**MOPO_DEFAULTS)
+        self.mopo_user_keys: list[str] = []
+        """The `maple` keys the user set (those the dataset's MOPO setting leaves alone)."""
+
+    def maple(self, **settings: Any) -> MopoConfig:
+        if hasattr(self, "mopo_user_keys"):
+            self.mopo_user_keys = sorted({*self.mopo_user_keys, *settings})
+        return super().maple(**settings)
+
+    def update_from_dict(self, config_dict: dict[str, Any]) -> MopoConfig:
+        """MapleConfig's; a dict of a whole config (`to_dict()`) keeps its own user keys."""
+        user = config_dict.get("mopo_user_keys")
+        super().update_from_dict(config_dict)
+        if user is not None:
+            self.mopo_user_keys = sorted(user)
+        return self
+
+    @property
+    def settings(self) -> MapleSettings:
+        return MapleSettings.from_dict(self._mopo_settings())
+
+    def _mopo_settings(self) -> dict[str, Any]:
+        per_dataset = mopo_dataset_settings(data_paths(self))
+        keep = set(self.mopo_user_keys)
+        return {**self.maple_settings, **{k: v for k, v in per_dataset.items() if k not in keep}}
+
+    @property
+    def _model_config_auto_includes(self) -> dict[str, Any]:
+        return super()._model_config_auto_includes | {"maple": self._mopo_settings()}
 
 
 def data_paths(config: AlgorithmConfig) -> list[str]:

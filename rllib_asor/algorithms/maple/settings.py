@@ -1,10 +1,13 @@
 """`MapleSettings`: MAPLE's (and MOPO's) own hyperparameters, typed and validated.
 
 Defaults follow the PyTorch code MAPLE+SRPO runs on (`AIDefender/SRPO
-offlinerl/config/algo/maple_config_st.py`) except docs/maple.md's deviations, and MOPO's
-ensemble (`polixir/OfflineRL offlinerl/config/algo/mopo_config.py`: 7 members, 5 elites;
-`xionghuichen/MAPLE examples/config/d4rl/base_maple.py`: 4×200 swish). The same names are the
-YAML `maple:` block. A bad value raises ValueError naming the key, the value and what is allowed.
+offlinerl/config/algo/maple_config_st.py`, `maple_config.py`: an ensemble of 20 members, 14
+elites, 4×256 swish) except docs/maple.md's deviations. `ensemble: tf_maple` (a key of the block,
+expanded on the way in) picks the TensorFlow MAPLE's / MOPO's smaller ensemble instead (7
+members, 5 elites, 4×200: `xionghuichen/MAPLE examples/config/d4rl/base_maple.py`,
+`polixir/OfflineRL offlinerl/config/algo/mopo_config.py`), which the default was before.
+The same names are the YAML `maple:` block. A bad value raises ValueError naming the key, the
+value and what is allowed.
 """
 
 from __future__ import annotations
@@ -53,9 +56,11 @@ class MapleSettings:
     alpha_lr: float = 3e-4
     """Temperature lr (the port uses the actor's)."""
     tau: float = 5e-3
-    ensemble_members: int = 7
-    ensemble_elites: int = 5
-    ensemble_hidden: int = 200
+    ensemble_members: int = 20
+    ensemble_elites: int = 14
+    ensemble_hidden: int = 256
+    """Members, elites and width: the torch port's 20 / 14 / 256 (`ensemble: tf_maple`: 7 / 5 /
+    200, the TF code's and MOPO's)."""
     ensemble_layers: int = 4
     ensemble_lr: float = 1e-3
     ensemble_weight_decay: float = 7.5e-5
@@ -78,7 +83,7 @@ class MapleSettings:
     @classmethod
     def from_dict(cls, settings: Mapping[str, Any] | None) -> MapleSettings:
         """Validated settings; unknown keys and bad values raise ValueError."""
-        settings = dict(settings or {})
+        settings = expand_ensemble(settings)
         names = [f.name for f in dataclasses.fields(cls)]
         refuse_unknown("maple", "a MAPLE", settings, names)
         out = cls(**settings)
@@ -150,4 +155,58 @@ def _check(s: MapleSettings, key: str, ok: Any, allowed: str) -> None:
 
 
 MOPO_DEFAULTS: dict[str, Any] = {"context": False, "horizon": 5, "penalty_coef": 1.0}
-"""MOPO = MAPLE with the context off; h 5 and λ 1 (MOPO's Hopper setting)."""
+"""MOPO = MAPLE with the context off; h 5 and λ 1 where `MOPO_DATASETS` has no entry for the
+data (`MopoConfig` takes h and λ from there when the user sets neither)."""
+
+ENSEMBLE_PRESETS: dict[str, dict[str, int]] = {
+    "torch_port": {"ensemble_members": 20, "ensemble_elites": 14, "ensemble_hidden": 256},
+    "tf_maple": {"ensemble_members": 7, "ensemble_elites": 5, "ensemble_hidden": 200},
+}
+"""`maple.ensemble`: the torch port's ensemble (the default, the paper's runs) or the TF MAPLE's
+and MOPO's (the default before; the finished MAPLE Hopper study used it)."""
+
+
+def expand_ensemble(settings: Mapping[str, Any] | None) -> dict[str, Any]:
+    """`settings` with an `ensemble` preset name replaced by its three values (keys written
+    beside it win); ValueError for an unknown name."""
+    out = dict(settings or {})
+    if "ensemble" not in out:
+        return out
+    name = out.pop("ensemble")
+    if not isinstance(name, str) or name not in ENSEMBLE_PRESETS:
+        raise ValueError(
+            f"maple.ensemble={name!r} is invalid: allowed {' | '.join(ENSEMBLE_PRESETS)}"
+        )
+    return {**ENSEMBLE_PRESETS[name], **out}
+
+
+MOPO_DATASETS: dict[tuple[str, str], tuple[int, float]] = {
+    ("halfcheetah", "random"): (5, 0.5),
+    ("halfcheetah", "medium"): (1, 1.0),
+    ("halfcheetah", "medium-replay"): (5, 1.0),
+    ("halfcheetah", "medium-expert"): (5, 5.0),
+    ("hopper", "random"): (5, 1.0),
+    ("hopper", "medium"): (5, 5.0),
+    ("hopper", "medium-replay"): (5, 1.0),
+    ("hopper", "medium-expert"): (5, 1.0),
+    ("walker2d", "random"): (1, 1.0),
+    ("walker2d", "medium"): (5, 5.0),
+    ("walker2d", "medium-replay"): (1, 1.0),
+    ("walker2d", "medium-expert"): (1, 2.0),
+}
+"""(task, dataset) → (h, λ) as MOPO sets them (`tianheyu927/mopo examples/config/d4rl/
+<task>_<dataset>.py`: `rollout_length`, `penalty_coeff`; its `mixed` is D4RL's medium-replay)."""
+
+
+def mopo_dataset_settings(paths: list[str]) -> dict[str, Any]:
+    """`{"horizon", "penalty_coef"}` MOPO uses for the dataset of these part dirs
+    (`.../<task>/<dynamics>/<quality>`; medium and expert parts together are medium-expert);
+    {} when MOPO has no setting for it."""
+    parts = [p.rstrip("/").split("/") for p in paths]
+    tasks = {p[-3] for p in parts if len(p) >= 3}
+    qualities = {p[-1] for p in parts}
+    if len(tasks) != 1:
+        return {}
+    quality = "medium-expert" if qualities == {"medium", "expert"} else "/".join(sorted(qualities))
+    found = MOPO_DATASETS.get((tasks.pop(), quality))
+    return {} if found is None else {"horizon": found[0], "penalty_coef": found[1]}

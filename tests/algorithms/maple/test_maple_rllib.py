@@ -190,7 +190,7 @@ def test_maple_policy_refuses_stateless_inference(parts, tmp_path):
     [
         ({"horizon": 0}, r"maple.horizon=0 is invalid: allowed an integer >= 1"),
         ({"real_ratio": 1.5}, r"maple.real_ratio=1.5 is invalid: allowed a number in \[0, 1\]"),
-        ({"ensemble_elites": 9}, r"maple.ensemble_elites=9 is invalid: allowed an integer <= "),
+        ({"ensemble_elites": 21}, r"maple.ensemble_elites=21 is invalid: allowed an integer <= "),
         ({"horizn": 5}, r"maple.horizn is not a MAPLE setting \(did you mean 'horizon'\?\)"),
         ({"context": "yes"}, r"maple.context='yes' is invalid: allowed true or false"),
         (
