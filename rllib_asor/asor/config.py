@@ -15,7 +15,7 @@ from typing import Annotated, Any, ClassVar, Literal
 from pydantic import Field, field_validator, model_validator
 
 from rllib_asor.asor import settings_model
-from rllib_asor.asor.settings_model import Allowed, Settings
+from rllib_asor.asor.settings_model import Allowed, Settings, one_of
 
 MODES = ("asor", "srpo", "count", "random")
 PROXIES = ("rnd", "ensemble", "rnd_per_dynamics")
@@ -99,18 +99,13 @@ LambdaSpec = Annotated[
 ]
 
 
-def _one_of(choices: tuple[str, ...]) -> Any:
-    """A string field taking one of `choices` (a Literal), refused as "a | b | c"."""
-    return Annotated[Literal[choices], Allowed(" | ".join(choices))]
-
-
-Preset = _one_of(PRESET_NAMES)
-RewardForm = _one_of(REWARD_FORMS)
-BonusNorm = _one_of(BONUS_NORMS)
-Shaping = _one_of(SHAPINGS)
-RealSource = _one_of(REAL_SOURCES)
-Mode = _one_of(MODES)
-Proxy = _one_of(PROXIES)
+Preset = one_of(PRESET_NAMES)
+RewardForm = one_of(REWARD_FORMS)
+BonusNorm = one_of(BONUS_NORMS)
+Shaping = one_of(SHAPINGS)
+RealSource = one_of(REAL_SOURCES)
+Mode = one_of(MODES)
+Proxy = one_of(PROXIES)
 
 
 class AsorConfig(Settings):

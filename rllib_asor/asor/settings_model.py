@@ -14,7 +14,7 @@ import difflib
 import typing
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
@@ -27,6 +27,11 @@ class Allowed:
     text: str
 
 
+def one_of(choices: tuple[str, ...]) -> Any:
+    """A string field taking one of `choices` (a Literal), refused as "a | b | c"."""
+    return Annotated[Literal[choices], Allowed(" | ".join(choices))]
+
+
 class Settings(BaseModel):
     """Base of a settings block; `block` names it in messages (`asor`, `escp`, `maple`)."""
 
@@ -36,6 +41,8 @@ class Settings(BaseModel):
     block: ClassVar[str] = "settings"
     label: ClassVar[str] = "a"
     """`escp.windw is not <label> setting`."""
+    bad_value: ClassVar[str] = "{block}.{key}={value!r} is invalid: allowed {allowed}"
+    """The one line for a bad value."""
 
     def __init__(self, /, **data: Any) -> None:
         try:
@@ -55,7 +62,9 @@ class Settings(BaseModel):
         if not first["loc"]:  # a check across fields raised its own message
             return str(first.get("ctx", {}).get("error", first["msg"]))
         key = str(first["loc"][0])
-        return f"{cls.block}.{key}={data.get(key)!r} is invalid: allowed {cls.allowed(key)}"
+        return cls.bad_value.format(
+            block=cls.block, key=key, value=data.get(key), allowed=cls.allowed(key)
+        )
 
     @classmethod
     def unknown_keys(cls, unknown: Sequence[str]) -> str:
@@ -75,7 +84,7 @@ class Settings(BaseModel):
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form (what RLlib configs store and `from_dict` reads back)."""
-        return self.model_dump()
+        return self.model_dump(mode="json")
 
 
 def _allowed_in(items: Sequence[Any]) -> str | None:
