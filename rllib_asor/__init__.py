@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from rllib_asor.envs.registration import register_envs
+from rllib_asor.registry.envs import register_envs
 
 register_envs()
 

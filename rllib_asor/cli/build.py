@@ -228,7 +228,7 @@ def _module_spec(block: dict[str, Any], exp: Experiment) -> Any:
     """RLModuleSpec for `rl_module: {module_class: ...}`; model_config comes from the config."""
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-    from rllib_asor.models import get_module_class
+    from rllib_asor.registry.models import get_module_class
 
     try:
         return RLModuleSpec(module_class=get_module_class(block["module_class"]))

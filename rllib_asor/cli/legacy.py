@@ -82,7 +82,7 @@ MOVED_MODULES: dict[str, str] = {
 }
 
 OBSERVATION_FILTERS = ("NoFilter", "MeanStdFilter")
-# `config.rl_module: {module_class: NAME, model_config: {...}}` (NAME: rllib_asor.models registry).
+# `config.rl_module: {module_class: NAME, model_config: {...}}` (NAME: rllib_asor.registry.models).
 RL_MODULE_KEYS = ("module_class", "model_config")
 
 

@@ -1,8 +1,5 @@
-"""Cross-dynamics benchmark environments, registered as gymnasium ids on import.
+"""Cross-dynamics benchmark environments. Their gymnasium ids (`rllib_asor.registry.envs.ENV_IDS`)
+are registered when `rllib_asor` is imported, so before any module here.
 
 Depends on nothing else of ours (DESIGN.md).
 """
-
-from rllib_asor.envs.registration import register_envs
-
-register_envs()

@@ -96,12 +96,16 @@ def make_multi_race_env(env_config: Mapping[str, Any] | None = None) -> RacePara
     return RaceParallelPettingZooEnv(game_env.parallel_env(**dict(env_config or {})))
 
 
+RACE_ENVS = {SINGLE_ENV: make_single_race_env, MULTI_ENV: make_multi_race_env}
+"""The race's Tune names and their creators (`rllib_asor.registry.envs` reads this table)."""
+
+
 def register_race_envs() -> None:
-    """Register `SINGLE_ENV` and `MULTI_ENV` with Tune (idempotent; call before building)."""
+    """Register `RACE_ENVS` with Tune (idempotent; call before building)."""
     from ray import tune
 
-    tune.register_env(SINGLE_ENV, make_single_race_env)
-    tune.register_env(MULTI_ENV, make_multi_race_env)
+    for name, creator in RACE_ENVS.items():
+        tune.register_env(name, creator)
 
 
 # ---------------------------------------------------------------------- metrics

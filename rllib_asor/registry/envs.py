@@ -1,5 +1,7 @@
-"""Our env ids for RLlib: import the modules that register them, check an id exists, make one.
-`env_names.register_env` registers any env name with Tune so that env runners can build it."""
+"""Env ids, one table for every process: our gymnasium ids (`ENV_IDS`, registered when
+`rllib_asor` is imported), the race's Tune names (`rllib_asor.race.config.RACE_ENVS`), a check
+that an id exists, and the creator Ray's env runners call. `env_names.register_env` registers
+any other env name with Tune so that env runners can build it."""
 
 from __future__ import annotations
 
@@ -8,12 +10,31 @@ from typing import Any
 
 from rllib_asor import ray_compat as compat
 
-# Modules whose import registers gymnasium ids; either may not exist (yet).
-REGISTERING_MODULES = ("rllib_asor.envs", "game_env")
+ENV_IDS: dict[str, str] = {
+    "rllib_asor/LavaWorld-v0": "rllib_asor.envs.lava:LavaWorldEnv",
+    "rllib_asor/HalfCheetahShift-v0": "rllib_asor.envs.mujoco_shift:HalfCheetahShiftEnv",
+    "rllib_asor/Walker2dShift-v0": "rllib_asor.envs.mujoco_shift:Walker2dShiftEnv",
+    "rllib_asor/HopperShift-v0": "rllib_asor.envs.mujoco_shift:HopperShiftEnv",
+    "rllib_asor/AntShift-v0": "rllib_asor.envs.mujoco_shift:AntShiftEnv",
+    "rllib_asor/HighwayDensity-v0": "rllib_asor.envs.traffic:HighwayDensityEnv",
+}
+"""Our cross-dynamics envs (`rllib_asor.envs`): gymnasium id -> "module:Class"."""
+REGISTERING_MODULES = ("game_env",)
+"""Modules whose import registers further gymnasium ids; one may not be installed."""
+
+
+def register_envs() -> None:
+    """Register every id in ENV_IDS with gymnasium (idempotent; entry points only, cheap)."""
+    import gymnasium as gym
+
+    for env_id, entry_point in ENV_IDS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point=entry_point)
 
 
 def import_registering_modules() -> None:
-    """Import every module in REGISTERING_MODULES that can be imported."""
+    """Register our ids and import every module in REGISTERING_MODULES that can be imported."""
+    register_envs()
     for name in REGISTERING_MODULES:
         try:
             importlib.import_module(name)
@@ -22,22 +43,21 @@ def import_registering_modules() -> None:
 
 
 def race_creators() -> dict[str, Any]:
-    """Tune name -> creator of the race envs (`rllib_asor.race.config`); {} without game_env."""
+    """Tune name -> creator of the race envs (`rllib_asor.race.config.RACE_ENVS`); {} without
+    game_env."""
     try:
         import game_env  # noqa: F401
         from rllib_asor.race import config as race
     except ImportError:
         return {}
-    return {race.SINGLE_ENV: race.make_single_race_env, race.MULTI_ENV: race.make_multi_race_env}
+    return dict(race.RACE_ENVS)
 
 
 def register_race_envs() -> None:
-    """`rllib_asor.race.config.register_race_envs()` when game_env is installed.
-
-    The race's own creators hand `max_episode_steps` to the env (a plain `gym.make` would
-    only wrap a TimeLimit the env does not see, losing the end-of-episode metrics) and add
-    the multi-racer PettingZoo env `game_env/ObstacleRaceMulti-v0`.
-    """
+    """The race's Tune names (`rllib_asor.race.config.register_race_envs`) when game_env is
+    installed: its creators hand `max_episode_steps` to the env (a plain `gym.make` would only
+    wrap a TimeLimit the env does not see, losing the end-of-episode metrics) and add the
+    multi-racer PettingZoo env `game_env/ObstacleRaceMulti-v0`."""
     if race_creators():
         from rllib_asor.race.config import register_race_envs as register
 

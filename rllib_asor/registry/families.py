@@ -25,7 +25,7 @@ class EnvFamily:
     metrics_callbacks: Callable[[], type] | None = None
     """The callbacks class added when the experiment names no `callbacks`."""
     default_module: str | None = None
-    """`rl_module.module_class` used when the experiment names none (rllib_asor.models)."""
+    """`rl_module.module_class` used when the experiment names none (rllib_asor.registry.models)."""
     config_defaults: Mapping[str, Any] = field(default_factory=dict)
     """Config keys set when the experiment does not set them."""
     curriculum: Callable[[Mapping[str, Any]], type] | None = None

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import rllib_asor.envs  # noqa: F401  (registers the ids)
-from rllib_asor.envs.registration import ENV_IDS, register_envs
+from rllib_asor.registry.envs import ENV_IDS, register_envs
 
 ENVS_DIR = Path(rllib_asor.envs.__file__).parent
 ALLOWED_ROOTS = {

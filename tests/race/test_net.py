@@ -8,8 +8,8 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
 import game_env
-from rllib_asor.models import MODULES, get_module_class
 from rllib_asor.race.net import DEFAULTS, RaceNetModule
+from rllib_asor.registry.models import MODULES, get_module_class
 
 B = 8
 

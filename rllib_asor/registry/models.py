@@ -1,4 +1,4 @@
-"""Name → RLModule class, so a YAML can say `module_class: race_net`.
+"""RLModule names a YAML can give (`module_class: race_net`), resolved to classes.
 
 `get_module_class("race_net")` or `get_module_class("my.pkg.module:MyModule")` (a dotted path
 with ``:`` or a last ``.`` before the class name) returns the class.
