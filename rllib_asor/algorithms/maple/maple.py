@@ -90,6 +90,9 @@ class MapleConfig(AlgorithmConfig):
     def __init__(self, algo_class: type | None = None) -> None:
         super().__init__(algo_class=algo_class or MAPLE)
         self.maple_settings: dict[str, Any] = MapleSettings().to_dict()
+        self.dara_settings: dict[str, Any] | None = None
+        """DARA's reward correction of the source rows (`rllib_asor.with_dara`, the YAML `dara:`
+        block; rllib_asor/algorithms/dara); None: off."""
         self.gamma = 0.99
         self.lr = None  # each optimizer has its own (maple.actor_lr, critic_lr, alpha_lr)
         self.train_batch_size_per_learner = 256
@@ -141,6 +144,10 @@ class MapleConfig(AlgorithmConfig):
     def validate(self) -> None:
         super().validate()
         MapleSettings.from_dict(self.maple_settings)
+        if self.dara_settings is not None:
+            from rllib_asor.algorithms.dara.settings import DaraSettings
+
+            DaraSettings.from_dict(self.dara_settings)
         if self.framework_str != "torch":
             raise ValueError(f"MAPLE needs framework='torch', got {self.framework_str!r}")
         if not data_paths(self):
@@ -223,6 +230,12 @@ class MAPLE(Algorithm):
                 f"MAPLE: offline input {missing[0]} does not exist; make the data first: "
                 "`make datasets` (docs/offline.md)"
             )
+        self._dara_info: dict[str, float] = {}
+        if self.config.dara_settings is not None:  # DARA: train on the relabelled copies
+            from rllib_asor.algorithms.dara.relabel import dara_parts
+
+            seed = int(self.config.seed or 0)
+            paths, self._dara_info = dara_parts(paths, self.config.dara_settings, seed)
         self._paths = paths
         self._manifest = _manifest(paths)
         t0 = time.perf_counter()
@@ -422,6 +435,8 @@ class MAPLE(Algorithm):
             window=1,
         )
         self.metrics.log_value("num_gradient_steps_lifetime", s.steps_per_iteration, reduce="sum")
+        if self._dara_info:
+            self.metrics.log_dict(self._dara_info, key="dara", window=1)
         if s.evaluation_interval and (it + 1) % s.evaluation_interval == 0:
             self._evaluate(module)
 
