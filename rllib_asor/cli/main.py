@@ -1,4 +1,5 @@
-"""`rllib` command: argument parsing and dispatch to train / evaluate / report / compare / ab / data."""
+"""`rllib` command: argument parsing and dispatch to train / evaluate / report / compare / ab / data
+/ schema."""
 
 from __future__ import annotations
 
@@ -21,14 +22,14 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The full `rllib` parser."""
-    from rllib_asor.cli import ab, compare, data, evaluate, quickstart, report, train
+    from rllib_asor.cli import ab, compare, data, evaluate, quickstart, report, schema, train
 
     parser = _Parser(
         prog="rllib", description="Train and evaluate RLlib (new API stack) agents, with ASOR."
     )
     parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(
-        dest="command", metavar="{train,evaluate,report,compare,ab,quickstart,data}"
+        dest="command", metavar="{train,evaluate,report,compare,ab,quickstart,data,schema}"
     )
     sub.required = True
     p_train = sub.add_parser(
@@ -68,6 +69,11 @@ def build_parser() -> argparse.ArgumentParser:
     p_data = sub.add_parser("data", help="offline datasets: collect, info, score (docs/offline.md)")
     data.add_arguments(p_data, common=_add_verbose)
     p_data.set_defaults(func=data.run)
+    p_schema = sub.add_parser(
+        "schema", help="the JSON Schema of the YAML experiment files (for an editor's YAML support)"
+    )
+    schema.add_arguments(p_schema)
+    p_schema.set_defaults(func=schema.run)
     return parser
 
 
@@ -102,7 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return e.code if isinstance(e.code, int) else 2
     if getattr(args, "verbose", False):
         os.environ[quiet.VERBOSE_ENV] = "1"
-    if args.command not in ("report", "compare"):  # the commands that run Ray
+    if args.command not in ("report", "compare", "schema"):  # the commands that run Ray
         quiet.quiet_driver()
     try:
         return int(args.func(args) or 0)

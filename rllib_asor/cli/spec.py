@@ -6,34 +6,99 @@ Legacy keys are translated on the way (`legacy.py`); nothing here needs Ray."""
 from __future__ import annotations
 
 import copy
+import importlib
 import json
 import os
 import re
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import yaml
+from pydantic import BaseModel, ConfigDict, Field
 
 from rllib_asor.cli import grid, legacy
 from rllib_asor.cli.errors import UsageError
 
-SPEC_KEYS = ("env", "run", "stop", "config", "checkpoint_config", "num_samples", "storage_path")
-
-
-CHECKPOINT_KEYS = (
-    "checkpoint_frequency",
-    "checkpoint_at_end",
-    "num_to_keep",
-    "checkpoint_score_attribute",
-    "checkpoint_score_order",
-)
-
-
 DEFAULT_NUM_TO_KEEP = 3
+
+
+class CheckpointSettings(BaseModel):
+    """`checkpoint_config:` of an experiment (the arguments of Tune's `CheckpointConfig`)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, use_attribute_docstrings=True)
+
+    checkpoint_frequency: Annotated[int, Field(ge=0)] = 0
+    """Save a checkpoint every this many training iterations (0: none on the way)."""
+    checkpoint_at_end: bool = True
+    """Save one when the trial ends."""
+    num_to_keep: Annotated[int, Field(ge=1)] | None = DEFAULT_NUM_TO_KEEP
+    """Checkpoints kept per trial (the best by `checkpoint_score_attribute`, else the latest);
+    null keeps all."""
+    checkpoint_score_attribute: str | None = None
+    """Result name that ranks checkpoints, e.g. env_runners/episode_return_mean."""
+    checkpoint_score_order: Literal["max", "min"] = "max"
+    """Keep the highest (max) or the lowest (min) scores."""
+
+
+class ExperimentSpec(BaseModel):
+    """One experiment of a YAML file, `name: {env, run, stop, config, checkpoint_config}` (the
+    old RLlib format; its legacy keys are translated with a warning)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, use_attribute_docstrings=True)
+
+    env: Annotated[str, Field(min_length=1)]
+    """The env: a registered id (CartPole-v1, rllib_asor/LavaWorld-v0,
+    game_env/ObstacleRace-v0), `module:EnvId` or a class path. `config.env` may give it instead."""
+    run: Annotated[str, Field(min_length=1)]
+    """The algorithm: an RLlib name (PPO, SAC, CQL, ...) or one of ours (ESCP, MAPLE, MOPO)."""
+    stop: dict[str, float] = {}
+    """When a trial stops: a result name and the value that ends it (training_iteration,
+    num_env_steps_sampled_lifetime, env_runners/episode_return_mean, time_total_s, ...)."""
+    config: dict[str, Any] = {}
+    """The AlgorithmConfig settings by name (old names are translated with a warning), any
+    value may be `{grid_search: [...]}`; our own blocks: `asor:`, `escp:`, `maple:`."""
+    checkpoint_config: CheckpointSettings = CheckpointSettings()
+    """When checkpoints are saved and how many are kept."""
+    num_samples: Annotated[int, Field(ge=1)] = 1
+    """Trials per grid point (Tune's num_samples)."""
+    storage_path: str | None = None
+    """Directory for the results (default ~/ray_results)."""
+
+
+SPEC_KEYS = tuple(ExperimentSpec.model_fields)
+CHECKPOINT_KEYS = tuple(CheckpointSettings.model_fields)
 ESCP_KEY = "escp_settings"
 """Where an `escp:` block goes (`EscpConfig.escp_settings`; validated in validate.py)."""
 MAPLE_KEY = "maple_settings"
 """Where a `maple:` block goes (`MapleConfig.maple_settings`; validated in validate.py)."""
+
+
+@dataclass(frozen=True)
+class SettingsBlock:
+    """One of our blocks in `config:`: the class that declares it, the runs it goes with
+    (None: any run the ASOR wiring supports) and the config key the parser moves it to
+    (None: `Experiment.asor`)."""
+
+    settings: str
+    """"module:Class" of its `Settings` declaration."""
+    runs: tuple[str, ...] | None
+    key: str | None
+    aliases: dict[str, str] = field(default_factory=dict)
+    """Other names of a field (`lambda` for `lambda_`)."""
+
+    def settings_class(self) -> type:
+        module, _, name = self.settings.partition(":")
+        return getattr(importlib.import_module(module), name)
+
+
+SETTINGS_BLOCKS: dict[str, SettingsBlock] = {
+    "asor": SettingsBlock("rllib_asor.asor.config:AsorConfig", None, None, {"lambda": "lambda_"}),
+    "escp": SettingsBlock("rllib_asor.algorithms.escp.settings:EscpSettings", ("ESCP",), ESCP_KEY),
+    "maple": SettingsBlock(
+        "rllib_asor.algorithms.maple.settings:MapleSettings", ("MAPLE", "MOPO"), MAPLE_KEY
+    ),
+}
+"""Our `config:` blocks by name; validate.py checks each, `rllib schema` describes each."""
 
 
 @dataclass
@@ -143,17 +208,17 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
             key=f"{name}.checkpoint_config.{bad_ckpt[0]}",
         )
     config = _mapping(spec.get("config") or {}, source, f"{name}.config")
-    asor = config.pop("asor", None)
-    if asor is not None:
-        asor = _mapping(asor, source, f"{name}.config.asor")
-    maple = config.pop("maple", None)
-    escp = config.pop("escp", None)
+    given = {block: config.pop(block) for block in SETTINGS_BLOCKS if block in config}
+    blocks = {
+        block: _mapping(value, source, f"{name}.config.{block}")
+        for block, value in given.items()
+        if value is not None  # `asor: null`: no block
+    }
     config, more = legacy.translate_config(config, source, f"{name}.config.", spec.get("run"))
     warns += more
-    if maple is not None:  # MAPLE/MOPO's own block: the MapleConfig attribute `maple_settings`
-        config[MAPLE_KEY] = _mapping(maple, source, f"{name}.config.maple")
-    if escp is not None:  # ESCP's own block: the EscpConfig attribute `escp_settings`
-        config[ESCP_KEY] = _mapping(escp, source, f"{name}.config.escp")
+    asor = blocks.pop("asor", None)
+    for block, settings in blocks.items():  # e.g. `maple:` -> MapleConfig.maple_settings
+        config[SETTINGS_BLOCKS[block].key or block] = settings
     if "input" in config:
         config["input"] = absolute_input(config["input"])
     stop, more = legacy.translate_stop(

@@ -12,146 +12,128 @@ value and what is allowed.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any, ClassVar
 
-from rllib_asor.algorithms.common.settings import is_int_at_least, is_number, refuse_unknown
+from pydantic import ConfigDict, Field, model_validator
+
+from rllib_asor.asor.settings_model import Allowed, Settings
+
+Flag = Annotated[bool, Allowed("true or false")]
+AtLeast1 = Annotated[int, Field(ge=1), Allowed("an integer >= 1")]
+NonNegative = Annotated[float, Field(ge=0), Allowed("a number >= 0")]
+Positive = Annotated[float, Field(gt=0), Allowed("a number > 0")]
 
 
-@dataclass
-class MapleSettings:
+def _ensemble_property(schema: dict[str, Any]) -> None:
+    """The block's `ensemble:` key (expanded by `expand_ensemble` before validation)."""
+    schema["properties"]["ensemble"] = {
+        "enum": list(ENSEMBLE_PRESETS),
+        "description": "A named ensemble: members, elites and width "
+        + "; ".join(
+            f"{name} {v['ensemble_members']}/{v['ensemble_elites']}/{v['ensemble_hidden']}"
+            for name, v in ENSEMBLE_PRESETS.items()
+        )
+        + " (keys written beside it win).",
+    }
+
+
+class MapleSettings(Settings):
     """MAPLE's settings (the YAML `maple:` block)."""
 
-    context: bool = True
+    model_config = ConfigDict(json_schema_extra=_ensemble_property)
+    block: ClassVar[str] = "maple"
+    label: ClassVar[str] = "a MAPLE"
+
+    context: Flag = True
     """True: MAPLE (GRU context for policy and critics); False: MOPO (the context switched off)."""
-    horizon: int = 10
+    horizon: AtLeast1 = 10
     """h, steps per model rollout and per training segment (MAPLE 10; MOPO 5)."""
-    penalty_coef: float = 0.25
+    penalty_coef: NonNegative = 0.25
     """λ_u, weight of the uncertainty penalty r − λ_u·u (MAPLE 0.25; MOPO 0.5-5 by task)."""
-    penalty_clip: float = 40.0
+    penalty_clip: NonNegative = 40.0
     """Clip of the uncertainty u (SRPO/torch port 40; the TF code 20)."""
-    real_ratio: float = 0.05
+    real_ratio: Annotated[float, Field(ge=0, le=1), Allowed("a number in [0, 1]")] = 0.05
     """Share of real segments in each SAC batch (the rest are model segments)."""
-    rollout_batch_size: int = 50_000
+    rollout_batch_size: AtLeast1 = 50_000
     """Model rollouts started per training iteration (one iteration = `steps_per_iteration`)."""
-    model_pool_size: int = 250_000
+    model_pool_size: AtLeast1 = 250_000
     """Model segments kept (a ring buffer)."""
-    checkpoint_model_pool: bool = False
+    checkpoint_model_pool: Flag = False
     """Also save the model pool in checkpoints (~2 KB per segment at h 10: ~0.5 GB at the
     default size), so that a restored run trains on the pool it had; False (as RLlib's
     `store_buffer_in_checkpoints`): a restored run starts from an empty pool, refilled by its
     next iterations' rollouts."""
-    steps_per_iteration: int = 1000
+    steps_per_iteration: AtLeast1 = 1000
     """SAC gradient steps per training iteration (the port's `in_train_epoch`)."""
-    hidden_refresh_every: int = 4
+    hidden_refresh_every: AtLeast1 = 4
     """Iterations between refreshes of the real segments' starting hidden states."""
-    gru_hidden: int = 128
-    context_dim: int = 16
-    hiddens: list[int] = dataclasses.field(default_factory=lambda: [256, 256])
+    gru_hidden: AtLeast1 = 128
+    """Width of the context GRU."""
+    context_dim: AtLeast1 = 16
+    """Size of the context vector the GRU's output is projected to."""
+    hiddens: Annotated[
+        list[Annotated[int, Field(ge=1)]],
+        Field(min_length=1, strict=False),
+        Allowed("a non-empty list of integers >= 1"),
+    ] = [256, 256]
     """Actor and critic MLP sizes after the context."""
-    actor_lr: float = 3e-4
-    critic_lr: float = 3e-4
-    alpha_lr: float = 3e-4
+    actor_lr: Positive = 3e-4
+    """Adam lr of the policy."""
+    critic_lr: Positive = 3e-4
+    """Adam lr of the critics."""
+    alpha_lr: Positive = 3e-4
     """Temperature lr (the port uses the actor's)."""
-    tau: float = 5e-3
-    ensemble_members: int = 20
-    ensemble_elites: int = 14
-    ensemble_hidden: int = 256
+    tau: Annotated[float, Field(gt=0, le=1), Allowed("a number in (0, 1]")] = 5e-3
+    """Polyak rate of the target critics."""
+    ensemble_members: AtLeast1 = 20
+    """Dynamics models in the ensemble."""
+    ensemble_elites: AtLeast1 = 14
+    """Members with the lowest holdout error, the ones model rollouts sample from."""
+    ensemble_hidden: AtLeast1 = 256
     """Members, elites and width: the torch port's 20 / 14 / 256 (`ensemble: tf_maple`: 7 / 5 /
     200, the TF code's and MOPO's)."""
-    ensemble_layers: int = 4
-    ensemble_lr: float = 1e-3
-    ensemble_weight_decay: float = 7.5e-5
-    ensemble_batch_size: int = 256
-    ensemble_patience: int = 5
+    ensemble_layers: AtLeast1 = 4
+    """Hidden layers of each dynamics model."""
+    ensemble_lr: Positive = 1e-3
+    """Adam lr of the dynamics ensemble."""
+    ensemble_weight_decay: NonNegative = 7.5e-5
+    """Weight decay of the dynamics ensemble."""
+    ensemble_batch_size: AtLeast1 = 256
+    """Minibatch size of the ensemble's training."""
+    ensemble_patience: AtLeast1 = 5
     """Epochs without any member improving on the holdout before the ensemble stops."""
-    ensemble_max_epochs: int | None = None
+    ensemble_max_epochs: Annotated[
+        Annotated[int, Field(ge=1)] | None, Allowed("null or an integer >= 1")
+    ] = None
     """Cap on ensemble epochs (None: until `ensemble_patience`, as the port)."""
-    ensemble_cache: str | None = "~/.cache/rllib-asor/maple"
+    ensemble_cache: Annotated[
+        Annotated[str, Field(min_length=1)] | None, Allowed("null or a directory path")
+    ] = "~/.cache/rllib-asor/maple"
     """Directory of trained ensembles, keyed by dataset, settings and seed (None: no cache),
     so that paired runs (MAPLE vs MAPLE+ASOR) share one ensemble."""
-    clip_floor: float = 100.0
+    clip_floor: NonNegative = 100.0
     """Model states are clipped to the data range ± 5 %, but at least to ±clip_floor (the port's
     `np.maximum(obs_max, 100)`); 0 clips to the data range ± 5 % only."""
-    evaluation_interval: int = 10
+    evaluation_interval: Annotated[int, Field(ge=0), Allowed("an integer >= 0")] = 10
     """Evaluate the policy every this many iterations (0: never; always at iteration 1 off)."""
-    evaluation_episodes: int = 5
+    evaluation_episodes: AtLeast1 = 5
     """Episodes per dynamics and evaluation (SRPO: 40)."""
 
-    @classmethod
-    def from_dict(cls, settings: Mapping[str, Any] | None) -> MapleSettings:
-        """Validated settings; unknown keys and bad values raise ValueError."""
-        settings = expand_ensemble(settings)
-        names = [f.name for f in dataclasses.fields(cls)]
-        refuse_unknown("maple", "a MAPLE", settings, names)
-        out = cls(**settings)
-        out.validate()
-        return out
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    def validate(self) -> None:
-        for key in ("context", "checkpoint_model_pool"):
-            _check(self, key, lambda v: isinstance(v, bool), "true or false")
-        for key in (
-            "horizon",
-            "rollout_batch_size",
-            "model_pool_size",
-            "steps_per_iteration",
-            "hidden_refresh_every",
-            "gru_hidden",
-            "context_dim",
-            "ensemble_members",
-            "ensemble_elites",
-            "ensemble_hidden",
-            "ensemble_layers",
-            "ensemble_batch_size",
-            "ensemble_patience",
-            "evaluation_episodes",
-        ):
-            _check(self, key, is_int_at_least(1), "an integer >= 1")
-        _check(self, "evaluation_interval", is_int_at_least(0), "an integer >= 0")
-        _check(
-            self,
-            "ensemble_max_epochs",
-            lambda v: v is None or is_int_at_least(1)(v),
-            "null or an integer >= 1",
-        )
-        for key in ("penalty_coef", "penalty_clip", "clip_floor", "ensemble_weight_decay"):
-            _check(self, key, is_number(0.0, None), "a number >= 0")
-        for key in ("actor_lr", "critic_lr", "alpha_lr", "ensemble_lr"):
-            _check(self, key, is_number(0.0, None, open_low=True), "a number > 0")
-        _check(self, "tau", is_number(0.0, 1.0, open_low=True), "a number in (0, 1]")
-        _check(self, "real_ratio", is_number(0.0, 1.0), "a number in [0, 1]")
-        _check(
-            self,
-            "hiddens",
-            lambda v: (
-                isinstance(v, list | tuple) and len(v) > 0 and all(is_int_at_least(1)(x) for x in v)
-            ),
-            "a non-empty list of integers >= 1",
-        )
-        _check(
-            self,
-            "ensemble_cache",
-            lambda v: v is None or (isinstance(v, str) and v != ""),
-            "null or a directory path",
-        )
+    @model_validator(mode="after")
+    def _elites_among_members(self) -> MapleSettings:
         if self.ensemble_elites > self.ensemble_members:
             raise ValueError(
                 f"maple.ensemble_elites={self.ensemble_elites!r} is invalid: allowed an integer "
                 f"<= ensemble_members ({self.ensemble_members})"
             )
-        self.hiddens = [int(x) for x in self.hiddens]
+        return self
 
-
-def _check(s: MapleSettings, key: str, ok: Any, allowed: str) -> None:
-    value = getattr(s, key)
-    if not ok(value):
-        raise ValueError(f"maple.{key}={value!r} is invalid: allowed {allowed}")
+    @classmethod
+    def from_dict(cls, settings: Mapping[str, Any] | None) -> MapleSettings:
+        """Validated settings (an `ensemble` name expanded); bad keys and values raise
+        ValueError."""
+        return cls(**expand_ensemble(settings))
 
 
 MOPO_DEFAULTS: dict[str, Any] = {"context": False, "horizon": 5, "penalty_coef": 1.0}
