@@ -158,13 +158,31 @@ class VectorAttentionEncoder(nn.Module):
         pad = self.num_tokens * self.token_size - self.in_dim
         if pad:
             x = nn.functional.pad(x, (0, pad))
-        x = x.reshape(x.shape[0], self.num_tokens, self.token_size)
-        return torch.einsum("btk,tke->bte", x, self.token_w) + self.token_b
+        x = x.reshape(x.shape[0], self.num_tokens, self.token_size).transpose(0, 1)
+        # One batched matmul over the tokens ([T, B, k] @ [T, k, E]); einsum("btk,tke->bte")
+        # computes the same products through ~3× as many permute/reshape calls.
+        return (torch.bmm(x, self.token_w) + self.token_b.unsqueeze(1)).transpose(0, 1)
+
+    def self_attention(self, q: torch.Tensor) -> torch.Tensor:
+        """`self.attn(q, q, q, need_weights=False)[0]` for a batch-first [B, T, E] input: the
+        same projections and the same `scaled_dot_product_attention` call, in 7 torch calls
+        where `nn.MultiheadAttention`'s general function makes ~30 (checks, transposes and
+        copies that self-attention without masks or dropout does not need). Inference without
+        autograd keeps `nn.MultiheadAttention`'s own fused path."""
+        attn = self.attn
+        if not (self.training or torch.is_grad_enabled()) or attn.dropout:
+            return attn(q, q, q, need_weights=False)[0]
+        b, t, e = q.shape
+        heads = attn.num_heads
+        qkv = nn.functional.linear(q, attn.in_proj_weight, attn.in_proj_bias)
+        qkv = qkv.view(b, t, 3, heads, e // heads).permute(2, 0, 3, 1, 4)  # [3, B, H, T, hd]
+        out = nn.functional.scaled_dot_product_attention(qkv[0], qkv[1], qkv[2])
+        out = out.transpose(1, 2).reshape(b, t, e)
+        return nn.functional.linear(out, attn.out_proj.weight, attn.out_proj.bias)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         h = self.tokens(x)
-        q = self.norm1(h)
-        h = h + self.attn(q, q, q, need_weights=False)[0]
+        h = h + self.self_attention(self.norm1(h))
         h = h + self.ff(self.norm2(h))
         return self.out(h.mean(dim=1))
 
@@ -270,9 +288,13 @@ class RaceNetModule(TorchRLModule, ValueFunctionAPI):
         return RLModule.forward_train(self, batch, **kwargs)
 
     def logits(self, embeddings: torch.Tensor) -> torch.Tensor:
-        """Concatenated logits of the action heads [B, sum(nvec)]."""
+        """Concatenated logits of the action heads [B, sum(nvec)]: one matrix product with the
+        heads' weights stacked (the same numbers as `cat([head(h) for head in pi_heads])`, in
+        4 torch calls instead of 17, and 3 instead of 24 in the backward pass)."""
         h = self.pi_trunk(embeddings)
-        return torch.cat([head(h) for head in self.pi_heads], dim=-1)
+        weight = torch.cat([head.weight for head in self.pi_heads])
+        bias = torch.cat([head.bias for head in self.pi_heads])
+        return nn.functional.linear(h, weight, bias)
 
     def _forward(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
         return {Columns.ACTION_DIST_INPUTS: self.logits(self.encoder(batch[Columns.OBS]))}

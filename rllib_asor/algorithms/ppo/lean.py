@@ -30,6 +30,7 @@ from ray.rllib.core.columns import Columns
 from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common.learner_speed import SameMathSpeedMixin, take_rows
 from rllib_asor.algorithms.common.pipeline import insert_beside
+from rllib_asor.algorithms.ppo.loss import SyncFreePPOLossMixin
 
 DROP_KEY = "drop_bootstrap_rows"
 """`learner_config_dict` key that switches the row drop on."""
@@ -78,8 +79,9 @@ class DropMaskedRows(ConnectorV2):
         return batch
 
 
-class LeanPPOMixin:
-    """Inserts `DropMaskedRows` after GAE when `learner_config_dict[DROP_KEY]` is set. Mix in
+class LeanPPOMixin(SyncFreePPOLossMixin):
+    """Inserts `DropMaskedRows` after GAE when `learner_config_dict[DROP_KEY]` is set, and
+    computes PPO's loss without host syncs (`SyncFreePPOLossMixin`: RLlib's formulas). Mix in
     before the PPO Learner (and after ASOR's mixin, whose piece must see the full batch)."""
 
     def build(self) -> None:
@@ -97,5 +99,5 @@ class LeanPPOMixin:
 
 
 class LeanPPOTorchLearner(SameMathSpeedMixin, LeanPPOMixin, PPOTorchLearner):
-    """RLlib's PPO Learner with this package's same-math speed-ups that can also drop the masked
-    bootstrap rows (`drop_bootstrap_rows`)."""
+    """RLlib's PPO Learner with this package's same-math speed-ups (the race's PPO Learner)
+    that can also drop the masked bootstrap rows (`drop_bootstrap_rows`)."""
