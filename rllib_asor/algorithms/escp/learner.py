@@ -120,6 +120,12 @@ class EscpLearnerMixin:
             sum(v for k, v in losses.items() if k != ENCODER_OPTIMIZER) + losses[ENCODER_OPTIMIZER]
         )
 
+    def _encoder_may_step(self, module: EscpTorchRLModule) -> bool:
+        """False when RMDM cannot be on in this step whatever the batch (the replay is below
+        `rmdm_min_replay`, or `rmdm_scale` is 0): z then needs no autograd graph."""
+        s = module.escp
+        return s.rmdm_scale != 0 and self._escp_replay_size >= s.rmdm_min_replay
+
     def _rmdm(
         self, module_id: str, module: EscpTorchRLModule, batch: dict[str, Any], z: torch.Tensor
     ) -> torch.Tensor:
@@ -159,9 +165,13 @@ class EscpLearnerMixin:
         self.metrics.log_dict(stats, key=module_id, window=1)  # type: ignore[attr-defined]
         if not on or s.rmdm_scale == 0:
             return torch.zeros((), device=z.device, requires_grad=True)  # encoder grads: None
+        if not z.requires_grad:  # `_encoder_may_step` said no: it must agree with `on`
+            raise RuntimeError("ESCP: RMDM switched on for a z computed without autograd")
         return res.loss * s.rmdm_scale
 
     def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
+        for module in self._escp_modules().values():
+            module.encoder_grad = self._encoder_may_step(module)
         out = super()._update(batch, **kwargs)  # type: ignore[misc]
         with torch.no_grad():
             for mid, module in self._escp_modules().items():

@@ -37,6 +37,7 @@ from rllib_asor.algorithms.escp.encoder import ContextEncoder, add_context_noise
 from rllib_asor.algorithms.escp.replay import DYNAMICS_ID, NEXT_WINDOW, WINDOW
 from rllib_asor.algorithms.escp.rmdm import TaskSlots
 from rllib_asor.algorithms.escp.settings import EscpSettings
+from rllib_asor.algorithms.sac.fast import TrainModeOnceMixin
 
 ESCP_KEY = "escp"
 """`model_config` key of the validated `EscpSettings` dict (set by EscpConfig)."""
@@ -68,10 +69,16 @@ def mlp(sizes: list[int], activation: str) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
-class EscpTorchRLModule(TorchRLModule, TargetNetworkAPI, QNetAPI, InferenceOnlyAPI):
+class EscpTorchRLModule(
+    TrainModeOnceMixin, TorchRLModule, TargetNetworkAPI, QNetAPI, InferenceOnlyAPI
+):
     """π(a | s, z), Q(s, a, z) ×2 (+ targets) and the context encoder (module docstring)."""
 
     framework = "torch"
+    disjoint_optimizer_losses = True
+    """Each optimizer's loss reaches only its own parameters (critics: z̄ or z detached,
+    targets without autograd; π: z detached, critics frozen, α detached; α: log π detached;
+    encoder: RMDM only), so the Learner takes one backward pass of their sum."""
 
     def setup(self) -> None:
         if not isinstance(self.action_space, gym.spaces.Box):
@@ -154,7 +161,10 @@ class EscpTorchRLModule(TorchRLModule, TargetNetworkAPI, QNetAPI, InferenceOnlyA
         """SAC's quantities with ESCP's inputs (ESCP `SAC.sac_update`)."""
         dist_cls = self.get_train_action_dist_cls()
         noise = self.escp.context_noise
-        z = self.context(batch[WINDOW])
+        # Without autograd while the encoder cannot step (the Learner says so: RMDM not yet
+        # switched on, or rmdm_scale 0): the same z, no graph for the GRU.
+        with torch.set_grad_enabled(self.__dict__.get("encoder_grad", True)):
+            z = self.context(batch[WINDOW])
         with torch.no_grad():
             z_next = self.context(batch[NEXT_WINDOW])
         z_pi = add_context_noise(z.detach(), noise)
@@ -222,17 +232,51 @@ class EscpTorchRLModule(TorchRLModule, TargetNetworkAPI, QNetAPI, InferenceOnlyA
             batch[Columns.OBS], batch[Columns.ACTIONS], self.critic_context(batch[DYNAMICS_ID], z)
         )
 
-    def state_values(self, batch: dict[str, Any]) -> torch.Tensor:
-        """V(s) = min Q(s, π's deterministic action, z̄_task), for ASOR's ranking."""
-        z = self.context(batch[WINDOW])
-        logits = self.policy_inputs(batch[Columns.OBS], z)
+    def task_mean_context(self, dynamics_id: torch.Tensor, window: torch.Tensor) -> torch.Tensor:
+        """The critics' z (`critic_context`) without running the encoder on rows whose task
+        has a moving average: the encoder runs only on the other rows' windows."""
+        slots = TaskSlots(self.task_ids).lookup(dynamics_id.reshape(-1).long(), add=False)
+        has_mean = (slots >= 0) & self.task_seen[slots.clamp(min=0)]
+        z_bar = self.task_means[slots.clamp(min=0)].to(window.dtype)
+        if bool(has_mean.all()):  # one host sync per call
+            return z_bar
+        missing = (~has_mean).nonzero().squeeze(-1)
+        z_bar = z_bar.clone()
+        z_bar[missing] = self.context(window[missing]).detach()
+        return z_bar
+
+    def state_values(self, batch: dict[str, Any], context: str | None = None) -> torch.Tensor:
+        """V(s) = min Q(s, π's deterministic action, z̄_task), for ASOR's ranking.
+
+        π's z is the window's (`context="window"`, the default: what π acts on, one encoder
+        pass over the batch) or the critics' z̄_task (`"task_mean"`: no encoder pass for rows
+        whose task has a moving average; `value_context` sets the default)."""
+        context = context or self.__dict__.get("value_context", "window")
+        obs, window, ids = batch[Columns.OBS], batch[WINDOW], batch[DYNAMICS_ID]
+        if context == "task_mean":
+            z_q = z_pi = self.task_mean_context(ids, window)
+        elif context == "window":
+            z_pi = self.context(window)
+            z_q = self.critic_context(ids, z_pi)
+        else:
+            raise ValueError(
+                f"context={context!r} is not allowed; expected 'window' or 'task_mean'"
+            )
+        logits = self.policy_inputs(obs, z_pi)
         action = torch.tanh(logits.chunk(2, dim=-1)[0])  # ESCP's deterministic action
-        return self._q(batch[Columns.OBS], action, self.critic_context(batch[DYNAMICS_ID], z))
+        return self._q(obs, action, z_q)
 
 
 def escp_state_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
-    """ASOR's `value_fn` for ESCP modules (rllib_asor.rllib.connector)."""
+    """ASOR's `value_fn` for ESCP modules (rllib_asor.rllib.connector): `state_values` with
+    the module's `value_context` (default "window")."""
     return module.state_values(batch)
+
+
+def escp_task_mean_state_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
+    """V(s) with z̄_task for π as well as for the critics: no encoder pass for rows of tasks
+    with a moving average (a different ranking input from `escp_state_values`)."""
+    return module.state_values(batch, context="task_mean")
 
 
 def _window(batch: dict[str, Any], key: str) -> torch.Tensor:

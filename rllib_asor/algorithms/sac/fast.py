@@ -28,11 +28,12 @@ docs/results.md, "Fast experiments: SAC speed"), a stock RLlib 2.60 SAC gradient
    discriminator/proxy work (V(s), partition, bonus) runs once per Learner call on all its
    rows, with the critics of the call's start.
 
-`fast_off_policy(config)` switches all of it on for a SAC or CQL config; `with_asor` calls it
-for SAC and CQL unless `learner_config_dict["fast_off_policy"]` is False. The tuned examples
-name the module and the buffer in YAML. Everything is a regular RLlib extension point
-(RLModule/catalog class, replay buffer class, Learner class), so checkpoints, Tune and
-remote Learners work as before.
+`fast_off_policy(config)` switches all of it on for a SAC or CQL config; `FastSACConfig` /
+`run: FastSAC` (rllib_asor/algorithms/sac/config.py) is SAC with it, and `rllib train` puts a
+`run: SAC` or `run: CQL` file on it unless `learner_config_dict["fast_off_policy"]` is False.
+`with_asor` never does: it keeps whichever path its config is on. Everything is a regular
+RLlib extension point (RLModule/catalog class, replay buffer class, Learner class), so
+checkpoints, Tune and remote Learners work as before.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ import gymnasium as gym
 import torch
 from ray.rllib.algorithms.cql.torch.default_cql_torch_rl_module import DefaultCQLTorchRLModule
 from ray.rllib.algorithms.sac.sac_catalog import SACCatalog
+from ray.rllib.algorithms.sac.sac_learner import ACTION_DIST_INPUTS_NEXT, QF_PREDS, QF_TWIN_PREDS
 from ray.rllib.algorithms.sac.torch.default_sac_torch_rl_module import DefaultSACTorchRLModule
 from ray.rllib.callbacks.callbacks import RLlibCallback
 from ray.rllib.core.columns import Columns
@@ -55,7 +57,7 @@ from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.core.models.configs import MLPEncoderConfig
 from ray.rllib.core.models.torch.encoder import TorchMLPEncoder
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
-from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+from ray.rllib.core.rl_module.rl_module import RLModule, RLModuleSpec
 
 from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
@@ -70,7 +72,7 @@ STEPS_PER_CALL = 16
 replayed rows, runs ASOR's piece once on them and steps on minibatches of the user's batch
 size (`learner_config_dict[MINIBATCH_KEY]`, replay.py), with a Polyak target update after each."""
 FAST_KEY = "fast_off_policy"
-"""`learner_config_dict` key: True once `fast_off_policy` ran, False opts `with_asor` out."""
+"""`learner_config_dict` key: True once `fast_off_policy` ran, False opts a `run: SAC` file out."""
 FLAT_STORAGE = "flat"
 """`replay_buffer_config["storage"]` that makes `FlatReplayCallback` install `FlatReplayBuffer`
 (RLlib's SAC validation accepts only its own buffer type names, so the type stays
@@ -154,12 +156,79 @@ class FastSACCatalog(SACCatalog):
         return ConcatQEncoder(self.qf_encoder_config)
 
 
-class FastSACTorchRLModule(DefaultSACTorchRLModule):
-    """RLlib's SAC module with `FastSACCatalog` (concat-MLP critics) unless told otherwise."""
+class TrainModeOnceMixin:
+    """`forward_train` without TorchRLModule's `self.train()` walk over every submodule when
+    the module is already in training mode (RLlib's `forward_inference`/`forward_exploration`
+    restore it with `train()` after their `eval()`): ~3 % of a fast SAC gradient step."""
+
+    def forward_train(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        if not self.training:  # type: ignore[attr-defined]
+            self.train()  # type: ignore[attr-defined]
+        return RLModule.forward_train(self, batch, **kwargs)  # type: ignore[arg-type]
+
+
+class FastSACTorchRLModule(TrainModeOnceMixin, DefaultSACTorchRLModule):
+    """RLlib's SAC module with `FastSACCatalog` (concat-MLP critics) unless told otherwise.
+
+    Its continuous-action `_forward_train` computes what RLlib's does, with the same random
+    draws in the same order, but runs the next-state policy pass without autograd (RLlib
+    builds and then detaches it) and keeps the list of critic parameters it freezes for the
+    policy term instead of rebuilding it every step."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         kwargs["catalog_class"] = kwargs.get("catalog_class") or FastSACCatalog
         super().__init__(*args, **kwargs)
+
+    @property
+    def disjoint_optimizer_losses(self) -> bool:
+        """Each optimizer's loss reaches only its own parameters (Box actions: this module's
+        forward and RLlib's SAC loss), so one backward pass of their sum gives every
+        parameter its own loss's gradient (`FastSACLearnerMixin.compute_gradients`)."""
+        return isinstance(self.action_space, gym.spaces.Box) and not self.inference_only
+
+    def _critic_params(self) -> list[torch.nn.Parameter]:
+        params = self.__dict__.get("_fast_critic_params")
+        if params is None:
+            nets = [self.qf, self.qf_encoder]
+            if self.twin_q:
+                nets += [self.qf_twin, self.qf_twin_encoder]
+            params = [p for net in nets for p in net.parameters()]
+            self.__dict__["_fast_critic_params"] = params  # not a submodule: no state_dict entry
+        return params
+
+    def _forward_train_continuous(self, batch: dict[str, Any]) -> dict[str, Any]:
+        obs, next_obs = batch[Columns.OBS], batch[Columns.NEXT_OBS]
+        out: dict[str, Any] = {}
+        logits = self.pi(self.pi_encoder({Columns.OBS: obs})[ENCODER_OUT])
+        with torch.no_grad():
+            logits_next = self.pi(self.pi_encoder({Columns.OBS: next_obs})[ENCODER_OUT])
+        taken = {Columns.OBS: obs, Columns.ACTIONS: batch[Columns.ACTIONS]}
+        out[QF_PREDS] = self._qf_forward_train_helper(taken, self.qf_encoder, self.qf)
+        if self.twin_q:
+            out[QF_TWIN_PREDS] = self._qf_forward_train_helper(
+                taken, self.qf_twin_encoder, self.qf_twin
+            )
+        out[Columns.ACTION_DIST_INPUTS] = logits
+        out[ACTION_DIST_INPUTS_NEXT] = logits_next
+        dist_cls = self.get_train_action_dist_cls()
+        actions, out["logp_resampled"] = dist_cls.from_logits(logits).rsample_and_logp()
+        with torch.no_grad():
+            next_actions, out["logp_next_resampled"] = dist_cls.from_logits(
+                logits_next
+            ).sample_and_logp()
+        params = self._critic_params()
+        for p in params:  # Q's gradient reaches π only (as RLlib's module)
+            p.requires_grad_(False)
+        try:
+            out["q_curr"] = self.compute_q_values({Columns.OBS: obs, Columns.ACTIONS: actions})
+        finally:
+            for p in params:
+                p.requires_grad_(True)
+        with torch.no_grad():
+            out["q_target_next"] = self.forward_target(
+                {Columns.OBS: next_obs, Columns.ACTIONS: next_actions}
+            )
+        return out
 
 
 class FastCQLTorchRLModule(DefaultCQLTorchRLModule):
@@ -197,13 +266,15 @@ def fast_off_policy(config: Any, enabled: bool = True) -> Any:
     Single-agent SAC with a uniform `EpisodeReplayBuffer` and n_step 1 gets all four parts;
     other SAC settings (prioritized replay, n-step, multi-agent) keep RLlib's buffer and
     connector path but still get the concat-MLP critics. CQL gets the critics (its batches
-    come from Ray Data). `enabled=False` only records the opt-out (for `with_asor`).
+    come from Ray Data). `enabled=False` only records the opt-out (a `run: SAC` file's).
     """
-    algo = config.algo_class.__name__ if config.algo_class is not None else ""
+    # "SAC" or "CQL" for those algorithms or a subclass of one (`FastSAC`)
+    mro = getattr(config.algo_class, "__mro__", ())
+    algo = next((c.__name__ for c in mro if c.__name__ in ("SAC", "CQL")), "")
     config = config.copy(copy_frozen=False)
     lcd = dict(config.learner_config_dict or {})
     if enabled and lcd.get(FAST_KEY) is True:
-        return config  # already on the fast path (e.g. a restored trial re-applying with_asor)
+        return config  # already on the fast path (e.g. a restored trial)
     if not enabled:
         lcd[FAST_KEY] = False
         config.learners(learner_config_dict=lcd)

@@ -9,10 +9,12 @@ from typing import Any
 import numpy as np
 import torch
 from ray.rllib.algorithms.sac.torch.sac_torch_learner import SACTorchLearner
+from ray.rllib.core import ALL_MODULES
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.rl_module.apis import TargetNetworkAPI
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 
+from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common.ddp import SortedModuleGradientsMixin
 from rllib_asor.algorithms.common.learner_speed import SameMathSpeedMixin
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY, FlatTransitions
@@ -82,6 +84,39 @@ class FastSACLearnerMixin(SameMathSpeedMixin):
                     self.last_update_ts_by_mid[mid] = 0  # type: ignore[attr-defined]
             return
         super().after_gradient_based_update(timesteps=timesteps)  # type: ignore[misc]
+
+    def compute_gradients(self, loss_per_module: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        """One backward pass per module whose optimizers' losses touch disjoint parameters
+        (`one_backward_module`), instead of RLlib's one per optimizer: the summed loss gives
+        every parameter the gradient of its own optimizer's loss. Other modules, and every
+        module with several Learners (DDP reduces per backward pass), go RLlib's way."""
+        single = (self.config.num_learners or 0) <= 1  # type: ignore[attr-defined]
+        ones = [m for m in loss_per_module if single and self.one_backward_module(m)]
+        if not ones:
+            return super().compute_gradients(loss_per_module, **kwargs)  # type: ignore[misc]
+        temp = compat.temp_losses(self)
+        grads: dict[Any, Any] = {}
+        for module_id in sorted(ones):
+            optims = [opt for _, opt in self.get_optimizers_for_module(module_id)]  # type: ignore[attr-defined]
+            losses = [temp.pop(k) for k in [k for k in temp if k[0] == module_id]]
+            for opt in optims:
+                opt.zero_grad(set_to_none=True)
+            torch.stack([loss.reshape(()) for loss in losses]).sum().backward()
+            for opt in optims:
+                for group in opt.param_groups:
+                    grads.update({self.get_param_ref(p): p.grad for p in group["params"]})  # type: ignore[attr-defined]
+        rest = {m: v for m, v in loss_per_module.items() if m not in ones}
+        if any(m != ALL_MODULES for m in rest):
+            grads.update(super().compute_gradients(rest, **kwargs))  # type: ignore[misc]
+        return grads
+
+    def one_backward_module(self, module_id: str) -> bool:
+        """Whether `module_id`'s optimizer losses only reach their own parameters: its module
+        says so (`disjoint_optimizer_losses`, e.g. the fast path's SAC module for Box actions:
+        critic losses reach the critics only, targets detached; the policy loss π only, critics
+        frozen, α detached; the α loss log α only, log π detached)."""
+        module = self.module[module_id].unwrapped()  # type: ignore[attr-defined]
+        return bool(getattr(module, "disjoint_optimizer_losses", False))
 
     @torch.no_grad()
     def _polyak_targets(self) -> None:
