@@ -77,14 +77,18 @@ class Settings(BaseModel):
 
     @classmethod
     def allowed(cls, key: str) -> str:
-        """The `Allowed` text of field `key` (from its metadata or its annotation)."""
-        info = cls.model_fields[key]
-        found = _allowed_in([*info.metadata, info.annotation])
-        return found or str(info.annotation)
+        """The `Allowed` text of field `key`."""
+        return allowed_text(cls, key)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form (what RLlib configs store and `from_dict` reads back)."""
         return self.model_dump(mode="json")
+
+
+def allowed_text(model: type[BaseModel], key: str) -> str:
+    """The `Allowed` text of `model`'s field `key` (from its metadata or its annotation)."""
+    info = model.model_fields[key]
+    return _allowed_in([*info.metadata, info.annotation]) or str(info.annotation)
 
 
 def _allowed_in(items: Sequence[Any]) -> str | None:

@@ -11,11 +11,12 @@ import json
 import os
 import re
 from dataclasses import dataclass, field
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from rllib_asor.asor.settings_model import Allowed, allowed_text, one_of
 from rllib_asor.cli import grid, legacy
 from rllib_asor.cli.errors import UsageError
 
@@ -27,16 +28,18 @@ class CheckpointSettings(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True, use_attribute_docstrings=True)
 
-    checkpoint_frequency: Annotated[int, Field(ge=0)] = 0
+    checkpoint_frequency: Annotated[int, Field(ge=0), Allowed("an integer >= 0")] = 0
     """Save a checkpoint every this many training iterations (0: none on the way)."""
-    checkpoint_at_end: bool = True
+    checkpoint_at_end: Annotated[bool | None, Allowed("true or false")] = True
     """Save one when the trial ends."""
-    num_to_keep: Annotated[int, Field(ge=1)] | None = DEFAULT_NUM_TO_KEEP
+    num_to_keep: Annotated[
+        Annotated[int, Field(ge=1)] | None, Allowed("an integer >= 1 or null")
+    ] = DEFAULT_NUM_TO_KEEP
     """Checkpoints kept per trial (the best by `checkpoint_score_attribute`, else the latest);
     null keeps all."""
-    checkpoint_score_attribute: str | None = None
+    checkpoint_score_attribute: Annotated[str | None, Allowed("a result name")] = None
     """Result name that ranks checkpoints, e.g. env_runners/episode_return_mean."""
-    checkpoint_score_order: Literal["max", "min"] = "max"
+    checkpoint_score_order: one_of(("max", "min")) = "max"
     """Keep the highest (max) or the lowest (min) scores."""
 
 
@@ -46,10 +49,10 @@ class ExperimentSpec(BaseModel):
 
     model_config = ConfigDict(extra="forbid", strict=True, use_attribute_docstrings=True)
 
-    env: Annotated[str, Field(min_length=1)]
+    env: Annotated[str, Field(min_length=1), Allowed("a registered env id such as CartPole-v1")]
     """The env: a registered id (CartPole-v1, rllib_asor/LavaWorld-v0,
     game_env/ObstacleRace-v0), `module:EnvId` or a class path. `config.env` may give it instead."""
-    run: Annotated[str, Field(min_length=1)]
+    run: Annotated[str, Field(min_length=1), Allowed("an RLlib algorithm name such as PPO")]
     """The algorithm: an RLlib name (PPO, SAC, CQL, ...) or one of ours (ESCP, MAPLE, MOPO)."""
     stop: dict[str, float] = {}
     """When a trial stops: a result name and the value that ends it (training_iteration,
@@ -59,14 +62,13 @@ class ExperimentSpec(BaseModel):
     value may be `{grid_search: [...]}`; our own blocks: `asor:`, `escp:`, `maple:`."""
     checkpoint_config: CheckpointSettings = CheckpointSettings()
     """When checkpoints are saved and how many are kept."""
-    num_samples: Annotated[int, Field(ge=1)] = 1
+    num_samples: Annotated[int, Field(ge=1), Allowed("an integer >= 1")] = 1
     """Trials per grid point (Tune's num_samples)."""
-    storage_path: str | None = None
+    storage_path: Annotated[str | None, Allowed("a directory path")] = None
     """Directory for the results (default ~/ray_results)."""
 
 
 SPEC_KEYS = tuple(ExperimentSpec.model_fields)
-CHECKPOINT_KEYS = tuple(CheckpointSettings.model_fields)
 ESCP_KEY = "escp_settings"
 """Where an `escp:` block goes (`EscpConfig.escp_settings`; validated in validate.py)."""
 MAPLE_KEY = "maple_settings"
@@ -193,20 +195,6 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
             else:
                 spec.setdefault(new, value)
                 warns.append(f"{source}: legacy key '{old}' translated to '{new}'")
-    unknown = sorted(set(spec) - set(SPEC_KEYS))
-    if unknown:
-        raise UsageError(
-            f"unknown key; allowed: {', '.join(SPEC_KEYS)}",
-            source=source,
-            key=f"{name}.{unknown[0]}",
-        )
-    bad_ckpt = sorted(set(ckpt) - set(CHECKPOINT_KEYS))
-    if bad_ckpt:
-        raise UsageError(
-            f"unknown key; allowed: {', '.join(CHECKPOINT_KEYS)}",
-            source=source,
-            key=f"{name}.checkpoint_config.{bad_ckpt[0]}",
-        )
     config = _mapping(spec.get("config") or {}, source, f"{name}.config")
     given = {block: config.pop(block) for block in SETTINGS_BLOCKS if block in config}
     blocks = {
@@ -226,39 +214,45 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     )
     warns += more
     env = spec.get("env", config.pop("env", None))
-    run = spec.get("run")
-    if not isinstance(run, str) or not run:
-        raise UsageError(
-            "missing or not a string; allowed: an RLlib algorithm name such as PPO",
-            source=source,
-            key=f"{name}.run",
-        )
-    if not isinstance(env, str) or not env:
-        raise UsageError(
-            "missing or not a string; allowed: a registered env id such as CartPole-v1",
-            source=source,
-            key=f"{name}.env",
-        )
-    num_samples = spec.get("num_samples", 1)
-    if isinstance(num_samples, bool) or not isinstance(num_samples, int) or num_samples < 1:
-        raise UsageError(
-            f"{num_samples!r} is invalid: allowed an integer >= 1",
-            source=source,
-            key=f"{name}.num_samples",
-        )
+    checked = {**spec, "env": env, "stop": stop, "config": {}, "checkpoint_config": ckpt}
+    try:
+        ExperimentSpec.model_validate({k: v for k, v in checked.items() if v is not None})
+    except ValidationError as e:
+        raise _spec_error(e, name, source, checked) from None
     return Experiment(
         name=name,
-        run=run,
+        run=spec["run"],
         env=env,
         source=source,
         config=config,
         asor=asor,
         stop=stop,
         checkpoint_config=ckpt,
-        num_samples=num_samples,
+        num_samples=spec.get("num_samples", 1),
         storage_path=spec.get("storage_path"),
         warnings=warns,
     )
+
+
+def _spec_error(
+    error: ValidationError, name: str, source: str, given: dict[str, Any]
+) -> UsageError:
+    """The first problem `ExperimentSpec` found, in one line naming the key."""
+    problem = error.errors()[0]
+    path = [str(part) for part in problem["loc"]]
+    model: type[BaseModel] = ExperimentSpec
+    if path[0] == "checkpoint_config" and len(path) > 1:
+        model, path, given = CheckpointSettings, path[:2], given["checkpoint_config"]
+    else:
+        path = path[:1]
+    key = f"{name}.{'.'.join(path)}"
+    if problem["type"] == "extra_forbidden":
+        message = f"unknown key; allowed: {', '.join(model.model_fields)}"
+    elif given.get(path[-1]) is None:
+        message = f"missing; allowed: {allowed_text(model, path[-1])}"
+    else:
+        message = f"{given[path[-1]]!r} is invalid: allowed {allowed_text(model, path[-1])}"
+    return UsageError(message, source=source, key=key)
 
 
 def from_flags(run: str, env: str, config_json: str | None, name: str | None = None) -> Experiment:
