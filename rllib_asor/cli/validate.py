@@ -9,7 +9,7 @@ from rllib_asor.cli.build import algorithm_class, build_algo_config
 from rllib_asor.cli.errors import UsageError, one_line, quiet
 from rllib_asor.cli.offline_inputs import check_offline_input
 from rllib_asor.cli.overrides import checkpoint_kwargs
-from rllib_asor.cli.spec import MAPLE_KEY, Experiment
+from rllib_asor.cli.spec import SETTINGS_BLOCKS, Experiment
 from rllib_asor.cli.stop_keys import check_stop
 
 
@@ -70,38 +70,23 @@ def _each_candidate(block: dict[str, Any], check: Any, exp: Experiment, key: str
             raise UsageError(one_line(e), source=exp.source, key=key) from None
 
 
-def validate_maple(exp: Experiment) -> None:
-    """A `maple:` block only with run MAPLE or MOPO, validated with `MapleSettings` for every
-    grid candidate."""
-    block = exp.config.get(MAPLE_KEY)
-    if block is None:
-        return
-    key = f"{exp.name}.config.maple"
-    if exp.run not in ("MAPLE", "MOPO"):
-        raise UsageError(
-            f"a maple: block needs run: MAPLE or MOPO, not {exp.run!r}", source=exp.source, key=key
-        )
-    from rllib_asor.algorithms.maple.settings import MapleSettings
-
-    _each_candidate(block, MapleSettings.from_dict, exp, key)
-
-
-def validate_escp(exp: Experiment) -> None:
-    """An `escp:` block only with run ESCP, validated with `EscpSettings` for every grid
-    candidate (one line naming the key, the value and what is allowed)."""
-    from rllib_asor.cli.spec import ESCP_KEY
-
-    block = exp.config.get(ESCP_KEY)
-    if block is None:
-        return
-    key = f"{exp.name}.config.escp"
-    if exp.run != "ESCP":
-        raise UsageError(
-            f"an escp: block needs run: ESCP, not {exp.run!r}", source=exp.source, key=key
-        )
-    from rllib_asor.algorithms.escp.settings import EscpSettings
-
-    _each_candidate(block, EscpSettings.from_dict, exp, key)
+def validate_blocks(exp: Experiment) -> None:
+    """Each block of `SETTINGS_BLOCKS` that names its runs (`escp:`, `maple:`) only with one of
+    them, validated by its settings class for every grid candidate (one line naming the key,
+    the value and what is allowed)."""
+    for name, block in SETTINGS_BLOCKS.items():
+        settings = exp.config.get(block.key) if block.runs and block.key else None
+        if settings is None:
+            continue
+        key = f"{exp.name}.config.{name}"
+        if exp.run not in block.runs:
+            article = "an" if name[0] in "aeiou" else "a"
+            raise UsageError(
+                f"{article} {name}: block needs run: {' or '.join(block.runs)}, not {exp.run!r}",
+                source=exp.source,
+                key=key,
+            )
+        _each_candidate(settings, block.settings_class().from_dict, exp, key)
 
 
 def validate_env(exp: Experiment) -> None:
@@ -172,13 +157,12 @@ def check_file(exp: Experiment, evaluation: bool = False) -> None:
 
 
 def _check_blocks(exp: Experiment) -> None:
-    """The grids, checkpoint settings, algorithm and `asor:`/`escp:`/`maple:` blocks."""
+    """The grids, checkpoint settings, algorithm and our blocks (`asor:`, `escp:`, ...)."""
     _check_grids(exp)
     _check_checkpoint_config(exp)
     algorithm_class(exp)
     validate_asor(exp)
-    validate_escp(exp)
-    validate_maple(exp)
+    validate_blocks(exp)
 
 
 def _check_config_points(exp: Experiment, evaluation: bool = False) -> Any:
