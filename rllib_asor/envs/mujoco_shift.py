@@ -33,7 +33,11 @@ element instead, as rand_param_envs/PEARL do). Modes:
   With `fixed`/`dynamics` given, nothing is sampled unless `params` is passed explicitly.
 
 `info["dynamics"]` holds the current values, `info["dynamics_id"]` an int (task index with
-`num_tasks`, else a stable 31-bit CRC32 of the rounded values; 0 = nominal).
+`num_tasks`, else a stable 31-bit CRC32 of the rounded values; 0 = nominal), and
+`info["dynamics_params"]` the sampled values as one float32 vector scaled to [-1, 1]
+(`param_names` says which: a multiplier m as log_base(m) / log_scale_limit, per-element
+multipliers by their mean log; wind as (wx, wy) / wind_limit; fixed values are left out),
+what a policy conditioned on the dynamics (OSI) reads.
 After a rewrite `mujoco.mj_setConst` refreshes the derived constants (subtree masses,
 inverse weights) on a scratch MjData, so the episode's state is untouched.
 """
@@ -292,12 +296,39 @@ class MujocoShiftEnv(gym.Env[np.ndarray, np.ndarray]):
         else:
             self.set_dynamics(self._sample(self._rng))
 
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        """The entries of `info["dynamics_params"]` (wind gives `wind_x`, `wind_y`)."""
+        names: list[str] = []
+        for p in SAMPLED_PARAMS:
+            if p in self.params:
+                names += ["wind_x", "wind_y"] if p == "wind" else [p]
+        return tuple(names)
+
+    def dynamics_params(self) -> np.ndarray:
+        """The sampled dynamics now as a float32 vector in [-1, 1] (module docstring);
+        nominal values (before the first reset) give 0."""
+        out: list[float] = []
+        log_base = float(np.log(self.scale_base))
+        for p in SAMPLED_PARAMS:
+            if p not in self.params:
+                continue
+            value = self.dynamics.get(p)
+            if p == "wind":
+                wind = np.zeros(2) if value is None else np.asarray(value, dtype=np.float64)
+                out += list(wind / self.wind_limit)
+            else:
+                m = 1.0 if value is None else np.asarray(value, dtype=np.float64)
+                out.append(float(np.mean(np.log(m))) / log_base / self.log_scale_limit)
+        return np.asarray(out, dtype=np.float32)
+
     def _info(self, info: dict[str, Any]) -> dict[str, Any]:
         info = dict(info)
         info["dynamics"] = {
             k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in self.dynamics.items()
         }
         info["dynamics_id"] = self.dynamics_id
+        info["dynamics_params"] = self.dynamics_params()
         return info
 
     # -- gymnasium API --------------------------------------------------------------------
