@@ -14,6 +14,7 @@ ALGORITHMS = {
     "MAPLE": "rllib_asor.algorithms.maple.maple:MAPLE",
     "MOPO": "rllib_asor.algorithms.maple.maple:MOPO",
     "ESCP": "rllib_asor.algorithms.escp.config:ESCP",
+    "OSI": "rllib_asor.algorithms.osi.config:OSI",  # universal policy + system identification
 }
 """Run name → "module:Class"."""
 
