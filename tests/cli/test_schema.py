@@ -37,10 +37,10 @@ def test_the_package_file_is_the_generated_schema():
     )
 
 
-def test_rllib_schema_prints_the_package_file(capsys):
+def test_rllib_schema_prints_the_generated_schema(capsys):
     assert main(["schema"]) == 0
     printed = capsys.readouterr().out
-    assert printed == schema.SCHEMA_FILE.read_text(encoding="utf-8")
+    assert printed == schema.schema_text()
     assert json.loads(printed)["$schema"] == schema.DIALECT
 
 
@@ -124,3 +124,18 @@ def test_the_asor_block_schema_takes_and_refuses_what_asor_config_does(key, good
         assert block.is_valid({key: value}), value
     for value in filter(_finite_json, bad):
         assert not block.is_valid({key: value}), value
+
+
+@pytest.mark.parametrize("name", ["asor", "escp", "maple"])
+def test_each_block_schema_is_strict_and_names_every_setting(name):
+    from rllib_asor.cli.spec import SETTINGS_BLOCKS
+
+    block = SETTINGS_BLOCKS[name]
+    cls = block.settings_class()
+    generated = schema.block_schema(name)
+    extra = {"ensemble"} if name == "maple" else set()  # the named-ensemble key
+    assert set(generated["properties"]) == set(cls.model_fields) | set(block.aliases) | extra
+    assert generated["additionalProperties"] is False
+    validator = jsonschema.Draft202012Validator(generated)
+    assert validator.is_valid(cls().to_dict())  # the defaults pass
+    assert not validator.is_valid({"no_such_setting": 1})
