@@ -17,9 +17,18 @@ register_envs()
 if TYPE_CHECKING:
     from rllib_asor.algorithms.escp.config import EscpConfig
     from rllib_asor.algorithms.maple.maple import MapleConfig, MopoConfig
+    from rllib_asor.algorithms.osi.config import OsiConfig
     from rllib_asor.asor.config import AsorConfig
 
-__all__ = ["AsorConfig", "EscpConfig", "MapleConfig", "MopoConfig", "with_asor"]
+__all__ = [
+    "AsorConfig",
+    "EscpConfig",
+    "MapleConfig",
+    "MopoConfig",
+    "OsiConfig",
+    "with_asor",
+    "with_dara",
+]
 __version__ = "0.1.0"
 
 
@@ -45,6 +54,15 @@ def _with_asor_doc() -> str:
 with_asor.__doc__ = _with_asor_doc()
 
 
+def with_dara(algo_config: Any, **dara_settings: Any) -> Any:
+    """Return a copy of `algo_config` (MAPLE or MOPO) with DARA's reward correction of the
+    source rows (`rllib_asor.algorithms.dara`; settings: `DaraSettings`). Bad settings raise
+    ValueError naming the key, the value and what is allowed."""
+    from rllib_asor.algorithms.dara.wiring import with_dara as _with_dara
+
+    return _with_dara(algo_config, **dara_settings)
+
+
 def __getattr__(name: str) -> Any:
     if name == "AsorConfig":
         from rllib_asor.asor.config import AsorConfig
@@ -58,4 +76,8 @@ def __getattr__(name: str) -> Any:
         from rllib_asor.algorithms.escp.config import EscpConfig
 
         return EscpConfig
+    if name == "OsiConfig":  # UP-OSI, imported on first use
+        from rllib_asor.algorithms.osi.config import OsiConfig
+
+        return OsiConfig
     raise AttributeError(f"module 'rllib_asor' has no attribute {name!r}")
