@@ -10,6 +10,8 @@ profiles `--updates` updates three ways, each normalised per minibatch:
 - `cprofile`: Python functions by own time (tottime) and by inclusive time (cumtime), in ms
   per minibatch; the per-update Learner connector (episodes → batch, GAE, ASOR's piece) shows
   as `_make_batch_if_necessary` and is spread over the update's minibatches.
+- `torch`: `torch.profiler` (with `--device cuda` also the GPU's own kernel time per minibatch:
+  far below the wall time means the GPU waits on the host, i.e. per-call overhead).
 - `ops`: aten operators that reach the dispatcher (forward, backward, optimizer, metrics:
   each is at least one kernel launch on a GPU), by name and count.
 - `syncs`: operations that stall a CUDA stream when the tensors live on a GPU: reading a
@@ -40,7 +42,7 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-WHAT = ("timing", "cprofile", "ops", "syncs")
+WHAT = ("timing", "cprofile", "ops", "syncs", "torch")
 # Ops whose result size or value the host must read (a stream sync when the input is on a GPU).
 SYNC_OPS = {
     "aten::_local_scalar_dense": "read a value on the host (.item/float/int/bool/if)",
@@ -54,6 +56,16 @@ SYNC_OPS = {
     "aten::lift_fresh": "torch.tensor(host data)",
 }
 SYNC_METHODS = ("cpu", "numpy", "tolist")
+# Ops that only make a new view (or record a profiler range): CPU dispatch work, no kernel.
+VIEW_OPS = {
+    "aten::" + name
+    for name in (
+        "detach", "t", "view", "_unsafe_view", "slice", "transpose", "permute", "unsqueeze",
+        "squeeze", "expand", "select", "as_strided", "alias", "unbind", "split", "narrow",
+        "split_with_sizes", "lift_fresh", "_record_function_enter_new", "_record_function_exit",
+        "_reshape_alias", "unflatten", "chunk", "_local_scalar_dense",
+    )
+}  # fmt: skip
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -208,6 +220,27 @@ def profile_timing(run: Run, minibatches: int) -> str:
     return "\n".join(out)
 
 
+def profile_torch(run: Run, minibatches: int, top: int) -> str:
+    from torch.profiler import ProfilerActivity, profile
+
+    cuda = run.args.device == "cuda"
+    activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if cuda else [])
+    t0 = time.perf_counter()
+    with profile(activities=activities) as prof:
+        for b in range(1, 1 + run.args.updates):
+            run.update(b)
+    wall = time.perf_counter() - t0
+    n = minibatches * run.args.updates
+    events = prof.key_averages()
+    out = [f"{1000 * wall / n:.1f} ms wall per minibatch under torch.profiler"]
+    if cuda:
+        device_us = sum(getattr(e, "self_device_time_total", 0) for e in events)
+        out.append(f"GPU kernel time: {device_us / 1000 / n:.2f} ms per minibatch")
+    sort = "self_cuda_time_total" if cuda else "self_cpu_time_total"
+    out.append(events.table(sort_by=sort, row_limit=top))
+    return "\n".join(out)
+
+
 def profile_python(run: Run, minibatches: int, top: int) -> str:
     prof = cProfile.Profile()
     t0, c0 = time.perf_counter(), time.process_time()
@@ -294,9 +327,10 @@ def profile_ops_and_syncs(run: Run, minibatches: int, top: int, what: list[str])
     out = []
     if "ops" in what:
         total = sum(ops.values())
+        kernels = sum(c for name, c in ops.items() if name not in VIEW_OPS)
         out.append(
-            f"aten ops per minibatch: {total / n:.0f} (each ≥ 1 kernel launch on a GPU); "
-            f"{time.perf_counter() - t0:.0f} s under the modes"
+            f"aten ops per minibatch: {total / n:.0f}, of them {kernels / n:.0f} that launch a "
+            f"kernel on a GPU (the rest make views); {time.perf_counter() - t0:.0f} s under the modes"
         )
         for name, c in ops.most_common(top):
             out.append(f"{c / n:8.1f}  {name}")
@@ -337,6 +371,9 @@ def main(argv: list[str] | None = None) -> int:
             run.refill()
         if "cprofile" in what:
             buf.write(profile_python(run, per_update, args.top) + "\n\n")
+            run.refill()
+        if "torch" in what:
+            buf.write(profile_torch(run, per_update, args.top) + "\n\n")
             run.refill()
         if "ops" in what or "syncs" in what:
             buf.write(profile_ops_and_syncs(run, per_update, args.top, what) + "\n")
