@@ -139,3 +139,18 @@ def test_each_block_schema_is_strict_and_names_every_setting(name):
     validator = jsonschema.Draft202012Validator(generated)
     assert validator.is_valid(cls().to_dict())  # the defaults pass
     assert not validator.is_valid({"no_such_setting": 1})
+
+
+@pytest.mark.parametrize("text", BAD)
+def test_what_the_schema_refuses_the_cli_refuses_in_one_line_naming_the_key(text, tmp_path):
+    from rllib_asor.cli.errors import UsageError
+    from rllib_asor.cli.spec import load_file
+    from rllib_asor.cli.validate import check_file
+
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(UsageError) as refused:
+        for exp in load_file(str(path)):
+            check_file(exp)
+    line = str(refused.value)
+    assert "\n" not in line and f"{path}: x." in line, line
