@@ -87,33 +87,14 @@ def task_episodes(module: Any, args: argparse.Namespace) -> tuple[np.ndarray, ..
 
 def _one_task_rollout(module: Any, values: dict, kw: dict, seed: int) -> np.ndarray:
     """z along one deterministic episode under fixed dynamics `values`."""
-    import gymnasium as gym
-    import torch
-    from ray.rllib.core.columns import Columns
+    from rllib_asor.algorithms.escp.evaluate import rollout
 
-    from rllib_asor.algorithms.escp.replay import WINDOW
-
-    env = gym.make(ENV_ID, **{k: v for k, v in kw.items() if k not in ("num_tasks",)})
-    low, high = env.action_space.low, env.action_space.high
-    obs, _ = env.reset(seed=seed, options={"dynamics": values})
-    h = module.escp.history_len
-    win = np.zeros((h, obs.shape[0] + low.shape[0]), np.float32)
-    last, zs, done = np.zeros(low.shape[0], np.float32), [], False
-    with torch.no_grad():
-        while not done:
-            win = np.roll(win, -1, axis=0)
-            win[-1] = np.concatenate([obs, last])
-            batch = {
-                Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None],
-                WINDOW: torch.as_tensor(win)[None],
-            }
-            zs.append(module.context(batch[WINDOW])[0].numpy())
-            logits = module.forward_inference(batch)[Columns.ACTION_DIST_INPUTS]
-            a = torch.tanh(logits.chunk(2, dim=-1)[0])[0].numpy()
-            obs, _, term, trunc, _ = env.step(low + (a + 1) * (high - low) / 2)
-            last, done = a.astype(np.float32), term or trunc
-    env.close()
-    return np.asarray(zs)
+    env_kwargs = {k: v for k, v in kw.items() if k not in ("num_tasks",)}
+    res = rollout(
+        module, ENV_ID, 1, seed=seed, env_kwargs=env_kwargs, record_context=True,
+        reset_options={"dynamics": values},
+    )  # fmt: skip
+    return res.contexts[0]
 
 
 def nearest_mean_accuracy(z, ids, halves, rng=None) -> float:
@@ -156,39 +137,38 @@ def switch_lags(module: Any, means: np.ndarray, args: argparse.Namespace) -> dic
 
 def _switching_rollout(module, values: list[dict], kw: dict, seed: int):
     """z along one episode whose dynamics alternate values[0], values[1] every 100 steps."""
-    import gymnasium as gym
-    import torch
-    from ray.rllib.core.columns import Columns
+    import itertools
 
-    from rllib_asor.algorithms.escp.replay import WINDOW
+    import gymnasium as gym
+
+    from rllib_asor.algorithms.escp.evaluate import EscpActor
+    from rllib_asor.evaluation.rollout import rollout, unsquash
 
     env = gym.make(
         ENV_ID, **{k: v for k, v in kw.items() if k not in ("num_tasks", "switch_every")}
     )
-    inner = env.unwrapped
-    low, high = env.action_space.low, env.action_space.high
-    obs, _ = env.reset(seed=seed, options={"dynamics": values[0]})
-    h = module.escp.history_len
-    win = np.zeros((h, obs.shape[0] + low.shape[0]), np.float32)
-    last, zs, seq, done, t = np.zeros(low.shape[0], np.float32), [], [], False, 0
-    with torch.no_grad():
-        while not done:
-            win = np.roll(win, -1, axis=0)
-            win[-1] = np.concatenate([obs, last])
-            zs.append(module.context(torch.as_tensor(win)[None])[0].numpy())
+    actor, seq = EscpActor(module, record_context=True), []
+
+    def switching():  # ESCP's step, switching the env's dynamics every 100 steps
+        step, steps = actor(), itertools.count()
+
+        def switch(obs, info):
+            t = next(steps)
             seq.append((t // 100) % 2 if t > 0 else 0)
             if t > 0 and t % 100 == 0:
-                inner.set_dynamics(values[(t // 100) % 2])
-            batch = {
-                Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None],
-                WINDOW: torch.as_tensor(win)[None],
-            }
-            logits = module.forward_inference(batch)[Columns.ACTION_DIST_INPUTS]
-            a = torch.tanh(logits.chunk(2, dim=-1)[0])[0].numpy()
-            obs, _, term, trunc, _ = env.step(low + (a + 1) * (high - low) / 2)
-            last, done, t = a.astype(np.float32), term or trunc, t + 1
-    env.close()
-    return np.asarray(zs), np.asarray(seq)
+                env.unwrapped.set_dynamics(values[(t // 100) % 2])
+            return step(obs, info)
+
+        return switch
+
+    try:
+        rollout(
+            switching, env, 1, seed=seed, action_fn=unsquash,
+            reset_options={"dynamics": values[0]},
+        )  # fmt: skip
+    finally:
+        env.close()
+    return np.asarray(actor.contexts[0]), np.asarray(seq)
 
 
 def figure(z, ids, halves, trace, path: Path) -> None:

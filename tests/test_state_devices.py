@@ -234,8 +234,7 @@ def test_evaluation_helpers_make_their_inputs_on_the_module_device() -> None:
     from ray.rllib.algorithms.sac import SACConfig
 
     import game_env
-    from rllib_asor.evaluation.rollout import deterministic_action
-    from rllib_asor.race.evaluation import module_policy
+    from rllib_asor.evaluation.rollout import deterministic_action, module_policy
     from tests.race.test_net import build, obs_batch
 
     env = gym.make(game_env.ENV_ID, map_id=0)

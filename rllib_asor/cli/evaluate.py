@@ -3,14 +3,14 @@
 The algorithm is restored with `Algorithm.from_checkpoint(path, config=...)` using the
 checkpoint's own config, changed only to sample locally (no remote env runners, one env);
 episodes come from the local env runner, so the same env-to-module connectors (filters,
-one-hot, ...) that ran in training run here too.
+one-hot, ...) that ran in training run here too. Their statistics are
+`rllib_asor.evaluation.summary`'s.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import pickle
 import sys
@@ -153,7 +153,7 @@ def evaluate(
     from ray.rllib.algorithms.algorithm import Algorithm
 
     from rllib_asor.cli.cluster import start_ray
-    from rllib_asor.evaluation.dynamics import dynamics_id
+    from rllib_asor.evaluation.summary import summarize
     from rllib_asor.registry import env_names
 
     quiet.import_quietly("ray.rllib.algorithms.dreamerv3.utils.debugging")  # see its docstring
@@ -173,78 +173,21 @@ def evaluate(
         done = algo.env_runner.sample(num_episodes=episodes, explore=explore)
     finally:
         algo.stop()
-    done = done[:episodes]
-    returns = [float(ep.get_return()) for ep in done]
-    lengths = [int(len(ep)) for ep in done]
-    ids = [_jsonable_id(dynamics_id(ep)) for ep in done]
-    per_dynamics: dict[str, dict[str, float]] = {}
-    for ret, did in zip(returns, ids, strict=True):
-        if did is not None:
-            row = per_dynamics.setdefault(str(did), {"episodes": 0, "return_sum": 0.0})
-            row["episodes"] += 1
-            row["return_sum"] += ret
-    per_dynamics = {
-        k: {"episodes": v["episodes"], "return_mean": v["return_sum"] / v["episodes"]}
-        for k, v in sorted(per_dynamics.items())
-    }
-    mean = sum(returns) / len(returns)
-    std = math.sqrt(sum((r - mean) ** 2 for r in returns) / len(returns))
+    stats = summarize(done[:episodes])
     return {
         "checkpoint": path,
         "env": env_id if isinstance(env_id, str) else str(env_id),
-        "episodes": len(returns),
+        "episodes": len(stats["returns"]),
         "explore": explore,
-        "return_mean": mean,
-        "return_std": std,
-        "return_min": min(returns),
-        "return_max": max(returns),
-        "returns": returns,
-        "lengths": lengths,
-        "episode_metrics": episode_metrics(done),
+        **{k: stats[k] for k in ("return_mean", "return_std", "return_min", "return_max")},
+        "returns": stats["returns"],
+        "lengths": stats["lengths"],
+        "episode_metrics": stats["episode_metrics"],
         "seed": seed,
         "evaluation_config": evaluation_config,
-        "dynamics_ids": ids,
-        "per_dynamics": per_dynamics,
+        "dynamics_ids": stats["dynamics_ids"],
+        "per_dynamics": stats["per_dynamics"],
     }
-
-
-def _jsonable_id(value: Any) -> Any:
-    """A dynamics id as JSON can hold it (numpy scalars -> Python numbers, else str)."""
-    if value is None or isinstance(value, str | int | float):
-        return value
-    if hasattr(value, "item"):
-        return value.item()
-    return str(value)
-
-
-def episode_metrics(episodes: list[Any]) -> dict[str, float]:
-    """Means over episodes of what the env reports in its last `info`: the race's
-    `info["episode_metrics"]` (success, trapped, unnecessary-jump rate, goal reward, ...) and
-    gymnasium's `is_success` (as `success`). Multi-agent episodes count every agent."""
-    rows: list[dict[str, float]] = []
-    for ep in episodes:
-        try:
-            info = ep.get_infos(-1)
-        except (AttributeError, IndexError, TypeError):
-            continue
-        infos = (
-            info.values() if info and all(isinstance(v, dict) for v in info.values()) else [info]
-        )
-        for one in infos:
-            row = {}
-            metrics = one.get("episode_metrics") if isinstance(one, dict) else None
-            if isinstance(metrics, dict):
-                row.update({k: float(v) for k, v in metrics.items() if _is_number(v)})
-            if isinstance(one, dict) and _is_number(one.get("is_success")):
-                row.setdefault("success", float(one["is_success"]))
-            if row:
-                rows.append(row)
-    keys = sorted({k for row in rows for k in row})
-    return {k: sum(r[k] for r in rows if k in r) / sum(k in r for r in rows) for k in keys}
-
-
-def _is_number(x: Any) -> bool:
-    return isinstance(x, int | float | bool) and math.isfinite(float(x))
 
 
 def run(args: argparse.Namespace) -> int:

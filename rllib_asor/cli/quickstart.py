@@ -120,9 +120,10 @@ def _evaluate_and_record(
     checkpoint: str, out: Path, episodes: int, max_steps: int
 ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The race evaluation (stochastic policy, as the studies) and a GIF; their files."""
-    from rllib_asor.race.evaluation import evaluate, load_module, module_policy, record_gif
+    from rllib_asor.evaluation.rollout import module_policy, policy_module
+    from rllib_asor.race.evaluation import evaluate, record_gif
 
-    policy = module_policy(load_module(checkpoint), explore=True)
+    policy = module_policy(policy_module(checkpoint), explore=True)
     evaluation = evaluate(policy, episodes, max_steps)
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, Any] = {"checkpoint": checkpoint}

@@ -1,8 +1,10 @@
 """The race's evaluation: a trained policy on every map, on course seeds training never drew.
 
 Used by `rllib quickstart` (`make train`) and `studies.lib.race_learning`, so the numbers they
-print are measured the same way: one racer, `episodes` courses per map with course seeds
-`EVAL_SEED0 + episode`, all envs stepped together in one batch; a GIF of one episode.
+print are measured the same way (policies: `rllib_asor.evaluation.rollout.module_policy`): one racer, `episodes` courses per map with course seeds
+`EVAL_SEED0 + episode`, all envs stepped together in one batch; a GIF of one episode. The
+episodes run through the project's one loop (`rllib_asor.evaluation.rollout.play`); what is the
+race's here is which envs, the paper's columns and the frames.
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ EVAL_SEED0 = 10_000
 with probability 1: training draws course seeds 0..999)."""
 
 Policy = Callable[[dict[str, np.ndarray], list[Any]], np.ndarray]
-"""`policy(obs_batch, envs) -> actions [N, 8]`: one action per env of the batch."""
+"""`policy(obs_batch, infos) -> actions [N, 8]`: one action per env of the stacked batch
+(`rllib_asor.evaluation.rollout.module_policy`)."""
 
 
 def evaluate(
@@ -41,25 +44,18 @@ def evaluate(
     """
     import game_env
     from game_env.env import ObstacleRaceEnv
+    from rllib_asor.evaluation.rollout import play, stack_obs
 
     maps = list(range(game_env.NUM_MAPS)) if maps is None else list(maps)
     pairs = [(m, EVAL_SEED0 + e) for m in maps for e in range(episodes)]
     # The limit goes to the constructor (a TimeLimit wrapper alone is not seen by the env).
     envs = [ObstacleRaceEnv(map_id=m, course_seed=s, max_episode_steps=max_steps) for m, s in pairs]
-    obs = [env.reset(seed=s)[0] for env, (_, s) in zip(envs, pairs, strict=True)]
-    metrics: list[dict[str, float] | None] = [None] * len(envs)
     try:
-        while any(m is None for m in metrics):
-            live = [i for i, m in enumerate(metrics) if m is None]
-            batch = {k: np.stack([obs[i][k] for i in live]) for k in obs[live[0]]}
-            actions = policy(batch, [envs[i] for i in live])
-            for i, a in zip(live, actions, strict=True):
-                obs[i], _, term, trunc, info = envs[i].step(a)
-                if term or trunc:
-                    metrics[i] = dict(info["episode_metrics"])
+        done = play(envs, [s for _, s in pairs], lambda obs, infos: policy(stack_obs(obs), infos))
     finally:
         for env in envs:
             env.close()
+    metrics = [dict(ep.info["episode_metrics"]) for ep in done]
     per_map: dict[int, dict[str, float]] = {}
     for m in maps:
         rows = [metrics[i] for i, (mm, _) in enumerate(pairs) if mm == m]
@@ -70,46 +66,6 @@ def evaluate(
         "mean": mean,
         "episodes": [[m, s, em] for (m, s), em in zip(pairs, metrics, strict=True)],
     }
-
-
-def module_policy(module: Any, explore: bool) -> Policy:
-    """Batched policy from a trained RLModule (stochastic if `explore`, else its mode)."""
-    import torch
-    from ray.rllib.core import Columns
-
-    from rllib_asor.devices import module_device
-
-    dist_cls = (
-        module.get_exploration_action_dist_cls()
-        if explore
-        else module.get_inference_action_dist_cls()
-    )
-
-    def act(batch: dict[str, np.ndarray], envs: list[Any]) -> np.ndarray:
-        device = module_device(module)
-        with torch.no_grad():
-            obs = {k: torch.as_tensor(v, device=device) for k, v in batch.items()}
-            logits = module.forward_inference({Columns.OBS: obs})[Columns.ACTION_DIST_INPUTS]
-            dist = dist_cls.from_logits(logits)
-            if not explore:
-                dist = dist.to_deterministic()
-            return dist.sample().cpu().numpy()
-
-    return act
-
-
-def load_module(checkpoint: str | os.PathLike[str]) -> Any:
-    """The policy's RLModule from an algorithm checkpoint written by `rllib train`."""
-    from ray.rllib.core import (
-        COMPONENT_LEARNER,
-        COMPONENT_LEARNER_GROUP,
-        COMPONENT_RL_MODULE,
-        DEFAULT_MODULE_ID,
-    )
-    from ray.rllib.core.rl_module.rl_module import RLModule
-
-    path = Path(checkpoint, COMPONENT_LEARNER_GROUP, COMPONENT_LEARNER, COMPONENT_RL_MODULE)
-    return RLModule.from_checkpoint(str(path / DEFAULT_MODULE_ID))
 
 
 def record_gif(
@@ -126,6 +82,7 @@ def record_gif(
     import imageio.v2 as imageio
 
     from game_env.env import ObstacleRaceEnv
+    from rllib_asor.evaluation.rollout import play, stack_obs
 
     env = ObstacleRaceEnv(
         map_id=map_id,
@@ -135,20 +92,20 @@ def record_gif(
         width=size[0],
         height=size[1],
     )
-    frames, metrics = [], {}
+    frames: list[Any] = []
+    steps = iter(range(max_steps + 1))
+
+    def act(obs: list[Any], infos: list[Any]) -> np.ndarray:  # a frame every `every` steps
+        if next(steps) % every == 0:
+            frames.append(env.render())
+        return policy(stack_obs(obs), infos)
+
     try:
-        obs, _ = env.reset(seed=course_seed)
-        for t in range(max_steps + 1):
-            if t % every == 0:
-                frames.append(env.render())
-            batch = {k: v[None] for k, v in obs.items()}
-            obs, _, term, trunc, info = env.step(policy(batch, [env])[0])
-            if term or trunc:
-                frames.append(env.render())
-                metrics = dict(info["episode_metrics"])
-                break
+        (ep,) = play([env], [course_seed], act)
+        frames.append(env.render())  # the last state
     finally:
         env.close()
+    metrics = dict(ep.info.get("episode_metrics", {}))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp.gif")

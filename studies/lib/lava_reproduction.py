@@ -97,27 +97,18 @@ def ppo_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
 
 def greedy_returns(module: Any, episodes: int = 3, layout: str = "B") -> dict[int, float]:
     """Mean return of the greedy policy on each lava row (deterministic env → few episodes)."""
-    import torch
-    from ray.rllib.core import Columns
-
     from rllib_asor.envs.lava import LAVA_ROWS, LavaWorldEnv
+    from rllib_asor.evaluation.rollout import module_actor, rollout, to_int
 
     out = {}
     for row in LAVA_ROWS:
         env = LavaWorldEnv(lava_row=row, layout=layout)
-        total = 0.0
-        for ep in range(episodes):
-            obs, _ = env.reset(seed=ep)
-            done = False
-            while not done:
-                with torch.no_grad():
-                    logits = module.forward_inference({Columns.OBS: torch.as_tensor(obs)[None]})[
-                        Columns.ACTION_DIST_INPUTS
-                    ]
-                obs, r, term, trunc, _ = env.step(int(logits.argmax(-1)))
-                total += r
-                done = term or trunc
-        out[row] = total / episodes
+        rewards: list[float] = []  # every step's, summed in order over the episodes
+        rollout(
+            module_actor(module), env, episodes, action_fn=to_int,
+            watch=lambda ep, a, r, info, rewards=rewards: rewards.append(r),
+        )  # fmt: skip
+        out[row] = sum(rewards) / episodes
     return out
 
 

@@ -157,15 +157,15 @@ def evaluate(
 ) -> dict[str, dict[str, float]]:
     """Mean return and length of the deterministic policy under each fixed dynamics (actions
     clipped to the action space, as RLlib's env runner does; `obs_fn` normalises obs)."""
-    from rllib_asor.evaluation.rollout import rollout
+    from rllib_asor.evaluation.rollout import clip, module_actor, rollout
 
     out = {}
     for dyn in EVAL_DYNAMICS:
-        rets, lens = rollout(
-            module, f"rllib_asor/{task}Shift-v0", episodes, seed=seed,
-            env_kwargs={"dynamics": dyn}, obs_fn=obs_fn,
+        done = rollout(
+            module_actor(module, obs_fn), f"rllib_asor/{task}Shift-v0", episodes, seed=seed,
+            env_kwargs={"dynamics": dyn}, action_fn=clip,
         )  # fmt: skip
-        out[dyn] = {"return": float(np.mean(rets)), "length": float(np.mean(lens))}
+        out[dyn] = {"return": float(np.mean(done.returns)), "length": float(np.mean(done.lengths))}
     return out
 
 

@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from rllib_asor.race.evaluation import COLUMNS, evaluate, module_policy
+from rllib_asor.evaluation.rollout import module_policy
+from rllib_asor.race.evaluation import COLUMNS, evaluate
 from studies.lib.common import (
     run_method_seed_grid,
     runs_made_otherwise,

@@ -67,34 +67,21 @@ def ppo_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
 
 def evaluate(module: Any, densities: list[float], episodes: int) -> dict[str, dict[str, float]]:
     """Greedy policy at fixed densities: mean return, crash rate, mean speed (m/s)."""
-    import gymnasium as gym
-    import torch
-    from ray.rllib.core import Columns
-
-    import rllib_asor.envs  # noqa: F401
+    from rllib_asor.evaluation.rollout import module_actor, rollout, to_int
 
     out = {}
     for d in densities:
-        env = gym.make("rllib_asor/HighwayDensity-v0", **{**ENV_CONFIG, "densities": [d]})
-        rets, crashes, speeds = [], [], []
-        for ep in range(episodes):
-            obs, _ = env.reset(seed=2000 + ep)
-            done, ret, info = False, 0.0, {}
-            while not done:
-                with torch.no_grad():
-                    logits = module.forward_inference(
-                        {Columns.OBS: torch.as_tensor(obs, dtype=torch.float32)[None]}
-                    )[Columns.ACTION_DIST_INPUTS]
-                obs, r, term, trunc, info = env.step(int(logits.argmax(-1)))
-                ret, done = ret + float(r), term or trunc
-                speeds.append(float(info.get("speed", np.nan)))
-            rets.append(ret)
-            crashes.append(float(bool(info.get("crashed", False))))
-        env.close()
+        speeds: list[float] = []
+        done = rollout(
+            module_actor(module), "rllib_asor/HighwayDensity-v0", episodes, seed=2000,
+            env_kwargs={**ENV_CONFIG, "densities": [d]}, action_fn=to_int,
+            watch=lambda ep, a, r, info, speeds=speeds: speeds.append(info.get("speed", np.nan)),
+        )  # fmt: skip
+        crashes = [float(bool(ep.info.get("crashed", False))) for ep in done.episodes]
         out[str(d)] = {
-            "return": float(np.mean(rets)),
+            "return": float(np.mean(done.returns)),
             "crash_rate": float(np.mean(crashes)),
-            "speed": float(np.nanmean(speeds)),
+            "speed": float(np.nanmean(np.asarray(speeds, dtype=float))),
         }
     return out
 

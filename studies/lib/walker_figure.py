@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-from rllib_asor.evaluation.rollout import deterministic_action
 from studies.lib.common import start_local_ray
 from studies.lib.mujoco_shift import train
 
@@ -37,41 +36,35 @@ ASOR = {
 
 def rollouts(algo, episodes: int, explore: bool, seed: int = 3000) -> list[dict]:
     """Episodes under the original dynamics with per-step env reward and log ω(s_t)."""
-    import gymnasium as gym
     import torch
-    from ray.rllib.core import Columns
 
-    import rllib_asor.envs  # noqa: F401
     from rllib_asor.asor.reward import reward_bonus
+    from rllib_asor.evaluation.rollout import module_actor, rollout
 
-    module = algo.get_module()
     disc = algo.learner_group._learner.module["asor_disc.default_policy"]
-    env = gym.make("rllib_asor/Walker2dShift-v0", dynamics="original")
+    policy = module_actor(algo.get_module(), explore=explore)()
+    states: list[list[np.ndarray]] = []
+    rewards: list[list[float]] = []
+
+    def actor():  # the module's step, keeping each episode's states
+        states.append([])
+        rewards.append([])
+
+        def step(obs, info):
+            states[-1].append(np.asarray(obs, dtype=np.float32))
+            return policy(obs, info)
+
+        return step
+
+    done = rollout(
+        actor, "rllib_asor/Walker2dShift-v0", episodes, seed=seed,
+        env_kwargs={"dynamics": "original"}, watch=lambda ep, a, r, info: rewards[ep].append(r),
+    )  # fmt: skip
     eps = []
-    for ep in range(episodes):
-        obs, _ = env.reset(seed=seed + ep)
-        states, rewards, done, term = [], [], False, False
-        while not done:
-            states.append(np.asarray(obs, dtype=np.float32))
-            if explore:
-                with torch.no_grad():
-                    out = module.forward_exploration(
-                        {Columns.OBS: torch.as_tensor(states[-1])[None]}
-                    )
-                    dist = module.get_exploration_action_dist_cls().from_logits(
-                        out[Columns.ACTION_DIST_INPUTS]
-                    )
-                    action = dist.sample()[0].numpy()
-            else:
-                action = deterministic_action(module, obs)
-            obs, r, term, trunc, _ = env.step(action)
-            rewards.append(float(r))
-            done = term or trunc
+    for s, r, ep in zip(states, rewards, done.episodes, strict=True):
         with torch.no_grad():
-            logits = disc.logits(torch.as_tensor(np.stack(states)))
-            log_omega = reward_bonus(logits, "log", -5.0).numpy()
-        eps.append({"rewards": rewards, "log_omega": log_omega.tolist(), "fell": bool(term)})
-    env.close()
+            log_omega = reward_bonus(disc.logits(torch.as_tensor(np.stack(s))), "log", -5.0)
+        eps.append({"rewards": r, "log_omega": log_omega.numpy().tolist(), "fell": ep.terminated})
     return eps
 
 

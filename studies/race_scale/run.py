@@ -54,8 +54,9 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     """Train one (method, seed) to the budget, evaluate, return the run record."""
     import torch
 
+    from rllib_asor.evaluation.rollout import module_policy
     from rllib_asor.race.config import register_race_envs
-    from rllib_asor.race.evaluation import evaluate, module_policy
+    from rllib_asor.race.evaluation import evaluate
 
     torch.set_num_threads(1)
     register_race_envs()

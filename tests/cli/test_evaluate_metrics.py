@@ -6,7 +6,7 @@ from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
 import game_env  # noqa: F401  (registers game_env/ObstacleRace-v0)
 import rllib_asor.envs  # noqa: F401
-from rllib_asor.cli.evaluate import episode_metrics
+from rllib_asor.evaluation.summary import episode_metrics
 
 
 def _episode(env_id: str, seed: int, **kwargs) -> SingleAgentEpisode:
