@@ -53,17 +53,6 @@ def race_creators() -> dict[str, Any]:
     return dict(race.RACE_ENVS)
 
 
-def register_race_envs() -> None:
-    """The race's Tune names (`rllib_asor.race.config.register_race_envs`) when game_env is
-    installed: its creators hand `max_episode_steps` to the env (a plain `gym.make` would only
-    wrap a TimeLimit the env does not see, losing the end-of-episode metrics) and add the
-    multi-racer PettingZoo env `game_env/ObstacleRaceMulti-v0`."""
-    if race_creators():
-        from rllib_asor.race.config import register_race_envs as register
-
-        register()
-
-
 def in_tune_registry(env_id: str) -> bool:
     """True if Tune has a creator registered under `env_id`."""
     from ray.tune.registry import ENV_CREATOR
@@ -76,7 +65,12 @@ def env_exists(env_id: str) -> bool:
     import gymnasium as gym
 
     import_registering_modules()
-    register_race_envs()
+    if race_creators():  # the race's Tune names (`race.config.register_race_envs`): its creators
+        # hand `max_episode_steps` to the env (a plain `gym.make` would only wrap a TimeLimit the
+        # env does not see, losing the end-of-episode metrics) and add the multi-racer env
+        from rllib_asor.race.config import register_race_envs
+
+        register_race_envs()
     return env_id in gym.registry or in_tune_registry(env_id)
 
 
