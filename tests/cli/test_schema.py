@@ -88,6 +88,9 @@ BAD = [  # the bad inputs of tests/cli/test_errors.py, tests/algorithms/*/test_*
     MAPLE + "  config:\n    maple: {horizon: 0}\n",
     MAPLE + "  config:\n    maple: {horizn: 5}\n",
     HEAD + "  config:\n    maple: {horizon: 5}\n",
+    MAPLE + "  config:\n    dara: {eta: -1}\n",
+    MAPLE + "  config:\n    dara: {target_dynamic: x}\n",
+    HEAD + "  config:\n    dara: {eta: 0.1}\n",
 ]
 
 
@@ -126,7 +129,7 @@ def test_the_asor_block_schema_takes_and_refuses_what_asor_config_does(key, good
         assert not block.is_valid({key: value}), value
 
 
-@pytest.mark.parametrize("name", ["asor", "escp", "maple"])
+@pytest.mark.parametrize("name", ["asor", "escp", "maple", "dara"])
 def test_each_block_schema_is_strict_and_names_every_setting(name):
     from rllib_asor.cli.spec import SETTINGS_BLOCKS
 
