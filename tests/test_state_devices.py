@@ -183,8 +183,7 @@ def test_maple_model_rollout_makes_its_tensors_on_the_ensemble_device() -> None:
 
 
 def test_maple_asor_bonus_makes_its_tensors_on_the_device_of_its_data() -> None:
-    from rllib_asor.rllib.maple_asor import maple_asor_bonus
-    from tests.rllib.test_soft_q_glue import _maple_case
+    from tests.rllib.test_soft_q_glue import _maple_case, maple_asor_bonus
 
     cfg = _cfg("robust default (archive, potential shaping)")
     case = _maple_case()

@@ -1,15 +1,23 @@
 """The ASOR learner-connector piece: partition the train batch and augment its rewards.
 
+The one entry point of ASOR for every algorithm (PPO, SAC, CQL, ESCP, MAPLE). What differs
+per algorithm is the algorithm's adapter (`algorithms/<name>/asor_adapter.py`,
+`rllib_asor.algorithms.common.asor_adapter.AsorAdapter`): which value ranks the states,
+which rows are ranked, where the reward goes and where the piece sits.
+
 Where it must sit: after `NumpyToTensor` and before the advantage / TD-target computation
 (PPO: right before `GeneralAdvantageEstimation`), so the critic learns the augmented return
 (docs/algorithm.md, step 7). It sees torch tensors, one dummy step per episode
 (`Columns.LOSS_MASK` False, left untouched) and, for stateful modules, `[B, T]` padding.
+Where batches bypass the Learner connector (the fast off-policy path's flat batches, offline
+dataset batches, MAPLE's batches), the Learner applies this same piece to its train batch.
 
-Per trained policy it turns the batch into an `AsorBatch` (flat features of the valid steps,
-V(s) from the policy's critic, the episode chunks), runs `rllib_asor.asor.update.asor_update`
-(the algorithm's steps, in order), adds its λ·b(s) to the rewards — b from the discriminator
-*before* this update's discriminator step — and writes the discriminator's and the proxy's
-own batches, so the Learner trains them in the same update.
+Per trained policy it turns the adapter's ranked rows into an `AsorBatch` (flat features of
+the valid steps, V(s) from the adapter, the episode chunks), runs
+`rllib_asor.asor.update.asor_update` (the algorithm's steps, in order), adds its λ·b(s) to
+the rewards (or, for an adapter with a `bonus_column`, writes λ·b of its bonus rows there) —
+b from the discriminator *before* this update's discriminator step — and writes the
+discriminator's and the proxy's own batches, so the Learner trains them in the same update.
 
 Several Learners (DDP): every Learner runs the same ASOR update on the rows of all Learners
 (`gather_batches`), so ASOR's state stays identical on all ranks; each keeps the bonus of its
@@ -36,11 +44,16 @@ from ray.rllib.core.columns import Columns
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.encoding import flatten, select, select_space
 from rllib_asor.asor.proxy import ProxyInputs
-from rllib_asor.asor.update import AsorBatch, Chunk, asor_update, concat_batches
+from rllib_asor.asor.update import (
+    AsorBatch,
+    AsorState,
+    Chunk,
+    asor_update,
+    bonus_for_rows,
+    concat_batches,
+)
 from rllib_asor.devices import module_device
 from rllib_asor.rllib.modules import DYNAMICS_ID, LABEL, proxy_batch
-
-ValueFn = Callable[[Any, dict[str, Any]], torch.Tensor]
 
 SHARED_VALUES = "asor_critic_values"
 """`shared_data` key: {policy id: V(s) of every batch row}, from ASOR's piece for GAE."""
@@ -52,11 +65,6 @@ class AuxModuleIds:
 
     disc: str
     proxy: str | None
-
-
-def critic_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
-    """V(s) from a `ValueFunctionAPI` module (PPO, APPO, IMPALA)."""
-    return module.compute_values(batch)
 
 
 class SharedValuesGAE(GeneralAdvantageEstimation):
@@ -129,20 +137,22 @@ class AsorRewardConnector(ConnectorV2):
         *,
         asor: AsorConfig,
         aux_ids: dict[str, AuxModuleIds],
-        timestep_fn: Callable[[], float],
-        value_fn: ValueFn,
+        adapter: Any,
         gamma: float,
+        timestep_fn: Callable[[], float] | None = None,
         **kwargs: Any,
     ) -> None:
+        """`adapter`: the algorithm's `AsorAdapter`; `timestep_fn`: env steps sampled so far
+        (λ schedules); None (offline): the number of rows this piece has ranked so far, on
+        every Learner (not checkpointed: it restarts at 0 on restore)."""
         super().__init__(input_observation_space, input_action_space, **kwargs)
         self.asor = asor
         self.aux_ids = dict(aux_ids)
+        self.adapter = adapter
         self.timestep_fn = timestep_fn
-        self.value_fn = value_fn
         self.gamma = float(gamma)
         self._rng = np.random.default_rng(asor.seed)
-        self.aux_batch_sizes: dict[str, int] = {}
-        """Rows of each aux module's batch from the last call (the Learner caps passes)."""
+        self.rows_ranked = 0
 
     def __call__(
         self,
@@ -155,10 +165,13 @@ class AsorRewardConnector(ConnectorV2):
         **kwargs: Any,
     ) -> Any:
         rank, size = rank_and_size()
+        timestep = self.timestep_fn() if self.timestep_fn is not None else float(self.rows_ranked)
         for policy_id, ids in sorted(self.aux_ids.items()):
             # Several Learners: every one takes part in every policy's (collective) update.
             if policy_id in batch or size > 1:
-                values = self._augment(rl_module, batch, policy_id, ids, episodes, metrics)
+                values = self._augment(
+                    rl_module, batch, policy_id, ids, episodes, metrics, timestep
+                )
                 if shared_data is not None and values is not None:
                     shared_data.setdefault(SHARED_VALUES, {})[policy_id] = values
         return batch
@@ -172,18 +185,22 @@ class AsorRewardConnector(ConnectorV2):
         ids: AuxModuleIds,
         episodes: Any,
         metrics: Any,
+        timestep: float,
     ) -> torch.Tensor | None:
         """Augments the rewards of `policy_id`; returns the critic's values of every row when
-        `value_fn` is `critic_values` (what GAE computes next), else None."""
+        the adapter shares them with GAE (what GAE computes next), else None."""
         state = rl_module[ids.disc].unwrapped().state
         proxy = rl_module[ids.proxy].unwrapped().proxy if ids.proxy is not None else None
         built = (
-            self._asor_batch(rl_module, batch, policy_id, episodes) if policy_id in batch else None
+            self._asor_batch(rl_module, batch, policy_id, episodes, timestep)
+            if policy_id in batch
+            else None
         )
         rank, size = rank_and_size()
         if size == 1:
             asor_batch, proxy_in = built[0], built[0].proxy_inputs
             result = asor_update(self.asor, state, proxy, asor_batch, self._rng)
+            self.rows_ranked += asor_batch.features.shape[0]
             own_delta, disc_feats, disc_labels = (
                 result.reward_delta,
                 result.disc_features,
@@ -197,6 +214,7 @@ class AsorRewardConnector(ConnectorV2):
                 return None
             whole = concat_batches(present)
             result = asor_update(self.asor, state, proxy, whole, self._rng)
+            self.rows_ranked += whole.features.shape[0]
             offset = sum(b.features.shape[0] for b in shards[:rank] if b is not None)
             own_delta = None
             if built is not None:
@@ -206,26 +224,31 @@ class AsorRewardConnector(ConnectorV2):
             proxy_in = even_share_inputs(whole.proxy_inputs, rank, size)
 
         if built is not None:
-            self._add_to_rewards(batch[policy_id], built[1], own_delta)
+            pb, column = batch[policy_id], self.adapter.bonus_column
+            if column is None:
+                self._add_to_rewards(pb, built[1], own_delta)
+            else:
+                pb[column] = bonus_on_rows(
+                    self.asor, state, result.lam, self.adapter.bonus_rows(pb), self.gamma
+                )
         batch[ids.disc] = {Columns.OBS: disc_feats, LABEL: disc_labels}
-        self.aux_batch_sizes[ids.disc] = disc_feats.shape[0]
         if ids.proxy is not None:
             batch[ids.proxy] = proxy_batch(proxy_in)
-            self.aux_batch_sizes[ids.proxy] = proxy_in.features.shape[0]
         if metrics is not None and result.metrics:
             metrics.log_dict(result.metrics, key=ids.disc, window=1)
-        if built is None or self.value_fn is not critic_values:
+        if built is None or not self.adapter.shares_values_with_gae:
             return None
         return built[2]
 
     def _asor_batch(
-        self, rl_module: Any, batch: dict, policy_id: str, episodes: Any
+        self, rl_module: Any, batch: dict, policy_id: str, episodes: Any, timestep: float
     ) -> tuple[AsorBatch, torch.Tensor, torch.Tensor]:
-        """(`AsorBatch` of the policy's valid rows, those rows' indices, the critic's raw
-        values of every row)."""
+        """(`AsorBatch` of the policy's valid ranked rows, those rows' indices, the critic's
+        raw values of every ranked row)."""
         cfg = self.asor
-        pb = batch[policy_id]
         policy = rl_module[policy_id].unwrapped()
+        ranked = self.adapter.ranked_columns
+        pb = batch[policy_id] if ranked is None else ranked(batch[policy_id])
         rewards = pb[Columns.REWARDS]
         lead, n = rewards.shape, rewards.numel()
         mask = pb.get(Columns.LOSS_MASK)
@@ -256,7 +279,7 @@ class AsorRewardConnector(ConnectorV2):
                 "augmentation needs finite rewards (check the env)"
             )
         with torch.no_grad():
-            raw_values = self.value_fn(policy, pb)
+            raw_values = self.adapter.state_values(policy, batch[policy_id])
         all_values = raw_values.reshape(-1).float()
         terminateds = pb.get(Columns.TERMINATEDS)
         terminateds = None if terminateds is None else flat(terminateds).bool()
@@ -276,7 +299,7 @@ class AsorRewardConnector(ConnectorV2):
             env_rewards=env_rewards,
             values=all_values[rows],
             gamma=self.gamma,
-            timestep=self.timestep_fn(),
+            timestep=timestep,
             proxy_inputs=proxy_in,
             terminateds=None if terminateds is None else terminateds[rows],
         )
@@ -319,6 +342,30 @@ class AsorRewardConnector(ConnectorV2):
         if row != valid.numel() or start != int(valid.sum()):
             return None
         return chunks
+
+
+def bonus_on_rows(
+    cfg: AsorConfig, state: AsorState, lam: float, rows: dict[str, Any], gamma: float
+) -> torch.Tensor:
+    """λ·b of every valid row of `rows` (an adapter's `bonus_rows`: `[..., D]` OBS and
+    NEXT_OBS, `[...]` TERMINATEDS and "valid") → `[...]`; padding gets 0 and stays out of the
+    batch statistics (`asor.update.bonus_for_rows`)."""
+    obs = rows[Columns.OBS]
+    mask = rows["valid"].reshape(-1).bool()  # the discriminator sees the valid steps only
+    b = bonus_for_rows(
+        cfg,
+        state,
+        lam,
+        obs.reshape(-1, obs.shape[-1])[mask],
+        rows[Columns.NEXT_OBS].reshape(-1, obs.shape[-1])[mask],
+        rows[Columns.TERMINATEDS].reshape(-1)[mask],
+        gamma,
+    )
+    delta = torch.zeros(mask.shape, dtype=b.dtype, device=b.device)
+    delta[mask] = b
+    if not torch.isfinite(delta).all():
+        raise ValueError("ASOR: the reward bonus is NaN/inf")
+    return delta.reshape(obs.shape[:-1])
 
 
 # ------------------------------------------------------------------ several Learners (DDP)

@@ -2,10 +2,13 @@
 
 `AsorLearnerMixin.build()` reads the validated settings from
 `config.learner_config_dict["asor"]`, finds each trained policy's discriminator/proxy modules,
-and inserts `AsorRewardConnector` at the algorithm's place (PPO: right before GAE). It also
-gives the auxiliary modules their own Adam optimisers (learning rates from `AsorConfig`,
-frozen RND target excluded). Every Learner here also has `SameMathSpeedMixin` (learner_speed.py):
-one nan/inf check per update, fused Adam, and a Learner connector without autograd.
+and builds the one `AsorRewardConnector` with the algorithm's adapter (`asor_adapter`, from
+`algorithms/<name>/asor_adapter.py`); it inserts the piece at the adapter's place in the
+Learner connector (PPO: right before GAE), or, where train batches bypass that pipeline, the
+Learner applies the same piece to its batch (`_apply_asor`). It also gives the auxiliary
+modules their own Adam optimisers (learning rates from `AsorConfig`, frozen RND target
+excluded). Every Learner here also has `SameMathSpeedMixin` (learner_speed.py): one nan/inf
+check per update, fused Adam, and a Learner connector without autograd.
 """
 
 from __future__ import annotations
@@ -14,7 +17,6 @@ import logging
 import math
 from typing import Any
 
-import gymnasium as gym
 import torch
 from ray.rllib.algorithms.cql.torch.cql_torch_learner import CQLTorchLearner
 from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
@@ -28,26 +30,27 @@ from ray.rllib.connectors.learner.add_next_observations_from_episodes_to_train_b
 )
 from ray.rllib.core.columns import Columns
 from ray.rllib.core.learner.training_data import TrainingData
-from ray.rllib.core.models.base import ENCODER_OUT
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
 from rllib_asor import ray_compat as compat
+from rllib_asor.algorithms.common.asor_adapter import AsorAdapter
 from rllib_asor.algorithms.common.ddp import SortedModuleGradientsMixin
 from rllib_asor.algorithms.common.learner_speed import SameMathSpeedMixin
 from rllib_asor.algorithms.common.pipeline import insert_beside
+from rllib_asor.algorithms.cql.asor_adapter import CQLAsorAdapter
+from rllib_asor.algorithms.ppo.asor_adapter import PPOAsorAdapter
 from rllib_asor.algorithms.ppo.lean import LeanPPOMixin
+from rllib_asor.algorithms.sac.asor_adapter import SACAsorAdapter
 from rllib_asor.algorithms.sac.learner import FastSACLearnerMixin
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
 from rllib_asor.asor.config import AsorConfig
-from rllib_asor.evaluation.rollout import deterministic_sample
 from rllib_asor.rllib.connector import (
     AddDynamicsIdsToBatch,
     AsorRewardConnector,
     AuxModuleIds,
     SharedValuesGAE,
-    critic_values,
 )
 
 DISC_PREFIX = "asor_disc."
@@ -91,18 +94,15 @@ logger = logging.getLogger(__name__)
 class AsorLearnerMixin(SameMathSpeedMixin):
     """Adds the ASOR piece to a Learner's pipeline; mix in before the algorithm's Learner."""
 
-    asor_insert_before: type | None = GeneralAdvantageEstimation
-    """The piece ASOR must precede (None: append at the end of the pipeline)."""
-    asor_in_pipeline: bool = True
-    """False where batches bypass the Learner connector (offline); then `_update` applies it."""
-    asor_value_fn = staticmethod(critic_values)
-    """V(s) of a policy's batch for the ranking (off-policy Learners: from their Q critics)."""
+    asor_adapter: AsorAdapter = PPOAsorAdapter()
+    """The algorithm's answers to the piece (which value, which rows, where the reward goes)."""
 
     def build(self) -> None:
         super().build()  # type: ignore[misc]
         self.asor = AsorConfig.from_dict(self.config.learner_config_dict.get("asor"))
         self._asor_timestep = 0.0
         self._asor_rows_trained = {}
+        self._asor_aux_sizes: dict[str, int] = {}
         aux = {
             pid: AuxModuleIds(
                 disc=disc_module_id(pid),
@@ -116,15 +116,24 @@ class AsorLearnerMixin(SameMathSpeedMixin):
                 "ASOR learner: no discriminator module found in the MultiRLModule; "
                 "build the config with rllib_asor.with_asor(config, ...)"
             )
+        in_pipeline = self.asor_adapter.in_pipeline
         self._asor_piece = AsorRewardConnector(
             asor=self.asor,
             aux_ids=aux,
-            timestep_fn=lambda: self._asor_timestep,
-            value_fn=self.asor_value_fn,
+            adapter=self.asor_adapter,
             gamma=self.config.gamma,
+            # offline (no env steps): λ's timestep is the rows the piece has ranked
+            timestep_fn=(lambda: self._asor_timestep) if in_pipeline else None,
         )
-        if self.asor_in_pipeline:
+        if in_pipeline:
             self._insert_asor_piece()
+
+    def _apply_asor(self, batch: dict[str, Any]) -> dict[str, Any]:
+        """The ASOR piece on a train batch that bypassed the Learner connector (the fast
+        off-policy path's flat batches, offline dataset batches, MAPLE's batches)."""
+        return self._asor_piece(
+            rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics
+        )
 
     def _insert_asor_piece(self) -> None:
         pipeline = compat.learner_connector(self)
@@ -146,10 +155,11 @@ class AsorLearnerMixin(SameMathSpeedMixin):
             insert_beside(
                 pipeline, AddObservationsFromEpisodesToBatch, AddDynamicsIdsToBatch(), before=False
             )
-        if self.asor_insert_before is None:
+        before = self.asor_adapter.insert_before
+        if before is None:
             pipeline.append(self._asor_piece)
             return
-        insert_beside(pipeline, self.asor_insert_before, self._asor_piece, before=True)
+        insert_beside(pipeline, before, self._asor_piece, before=True)
         gae = next((c for c in pipeline.connectors if type(c) is GeneralAdvantageEstimation), None)
         if gae is not None:  # RLlib's own GAE (not a user's subclass): reuse ASOR's critic pass
             shared = SharedValuesGAE(gamma=gae.gamma, lambda_=gae.lambda_)
@@ -179,10 +189,15 @@ class AsorLearnerMixin(SameMathSpeedMixin):
         here from the policy modules (aux modules are dropped after their own passes in
         `_update`).
         """
-        if minibatch_size and not num_total_minibatches and not training_data.data_iterators:
+        if not training_data.data_iterators:
             batch = self._make_batch_if_necessary(training_data=training_data)  # type: ignore[attr-defined]
             training_data = TrainingData(batch=batch)
-            num_total_minibatches = policy_minibatches(batch, num_epochs, minibatch_size)
+            # The aux batches' sizes, read from the batch the piece wrote (`aux_rows`).
+            self._asor_aux_sizes = {
+                mid: len(mb) for mid, mb in batch.policy_batches.items() if is_aux_module(mid)
+            }
+            if minibatch_size and not num_total_minibatches:
+                num_total_minibatches = policy_minibatches(batch, num_epochs, minibatch_size)
         batch_iter = super()._create_iterator_if_necessary(  # type: ignore[misc]
             training_data=training_data,
             num_total_minibatches=num_total_minibatches,
@@ -190,7 +205,7 @@ class AsorLearnerMixin(SameMathSpeedMixin):
             minibatch_size=minibatch_size,
             **kwargs,
         )
-        if self.asor_in_pipeline and isinstance(batch_iter, MiniBatchCyclicIterator):
+        if self.asor_adapter.in_pipeline and isinstance(batch_iter, MiniBatchCyclicIterator):
             return self._without_finished_aux(batch_iter)
         return batch_iter
 
@@ -209,8 +224,10 @@ class AsorLearnerMixin(SameMathSpeedMixin):
                     compat.iterator_covered_epochs(batch_iter).pop(module_id, None)
 
     def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
-        if self.asor_in_pipeline:
+        if self.asor_adapter.in_pipeline:
             batch = self._cap_aux_passes(batch)
+        else:  # the batch bypassed the Learner connector: the piece runs here, once per batch
+            batch = self._apply_asor(batch)
         return super()._update(batch, **kwargs)  # type: ignore[misc]
 
     def _cap_aux_passes(self, batch: dict[str, Any]) -> dict[str, Any]:
@@ -228,7 +245,7 @@ class AsorLearnerMixin(SameMathSpeedMixin):
     def aux_rows(self, module_id: str) -> float:
         """Rows the aux module trains on per update: `aux_epochs` passes over its batch (one
         pass when unset)."""
-        size = self._asor_piece.aux_batch_sizes.get(module_id, 0)
+        size = self._asor_aux_sizes.get(module_id, 0)
         return (1.0 if self.asor.aux_epochs is None else self.asor.aux_epochs) * size
 
     def configure_optimizers_for_module(self, module_id: str, config: Any = None) -> None:
@@ -251,20 +268,7 @@ class AsorLearnerMixin(SameMathSpeedMixin):
 class AsorPPOTorchLearner(AsorLearnerMixin, LeanPPOMixin, PPOTorchLearner):
     """PPO's torch Learner with ASOR's reward augmentation before GAE."""
 
-
-def soft_q_state_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
-    """V(s) for SAC/CQL modules: min over the twin critics of Q(s, π(s)).
-
-    Continuous actions: π's deterministic action, the squashed mean; discrete: the expectation
-    under π.
-    """
-    obs = {Columns.OBS: batch[Columns.OBS]}
-    logits = module.pi(module.pi_encoder(obs)[ENCODER_OUT])
-    if isinstance(module.action_space, gym.spaces.Discrete):
-        q_all = module.compute_q_values(obs, squeeze=False)
-        return (torch.softmax(logits, dim=-1) * q_all).sum(-1)
-    action = deterministic_sample(module.get_train_action_dist_cls().from_logits(logits))
-    return module.compute_q_values({**obs, Columns.ACTIONS: action})
+    asor_adapter = PPOAsorAdapter()
 
 
 class _SoftQAsorMixin(AsorLearnerMixin, SortedModuleGradientsMixin):
@@ -272,8 +276,7 @@ class _SoftQAsorMixin(AsorLearnerMixin, SortedModuleGradientsMixin):
     gradient loop (it pops `_temp_losses[(module_id, "<optimizer>_loss")]`), module by module
     in the same order on every Learner (algorithms/common/ddp.py)."""
 
-    asor_insert_before = None  # after NumpyToTensor, at the end of the pipeline (no GAE)
-    asor_value_fn = staticmethod(soft_q_state_values)
+    asor_adapter: AsorAdapter = SACAsorAdapter()
 
     def compute_losses(self, *, fwd_out: dict[str, Any], batch: dict[str, Any]) -> dict[str, Any]:
         losses = super().compute_losses(fwd_out=fwd_out, batch=batch)  # type: ignore[misc]
@@ -291,8 +294,7 @@ class FastSoftQAsorMixin(FastSACLearnerMixin, _SoftQAsorMixin):
         return [m for m in self.module.keys() if not is_aux_module(m)]
 
     def _flat_batch_hook(self, batch: dict[str, Any]) -> dict[str, Any]:
-        self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)
-        return batch
+        return self._apply_asor(batch)
 
     def aux_rows(self, module_id: str) -> float:
         """On the fast path (a call = STEPS_PER_CALL gradient steps on replayed rows) the aux
@@ -309,30 +311,8 @@ class AsorSACTorchLearner(FastSoftQAsorMixin, SACTorchLearner):
 
 
 class AsorCQLTorchLearner(_SoftQAsorMixin, CQLTorchLearner):
-    """CQL (offline) with ASOR. Offline batches come through Ray Data's `OfflinePreLearner`,
-    where connector pieces added in `build()` never run, so the ASOR piece is applied to each
-    batch in `_update`, before the losses.
+    """CQL (offline) with ASOR: dataset batches bypass the Learner connector, so the Learner
+    applies the piece to each batch in `_update`, before the losses; λ's timestep is the
+    number of dataset rows ranked so far (`algorithms/cql/asor_adapter.py`)."""
 
-    Offline runs sample no env steps, so a λ schedule's timestep is the number of dataset rows
-    this Learner has trained on (counted here; not checkpointed: it restarts at 0 on restore).
-    """
-
-    asor_in_pipeline = False
-
-    def build(self) -> None:
-        super().build()
-        self._asor_offline_rows = 0
-
-    def before_gradient_based_update(self, *, timesteps: dict[str, Any]) -> None:
-        super().before_gradient_based_update(timesteps=timesteps)
-        self._asor_timestep = float(self._asor_offline_rows)
-
-    def _update(self, batch: dict[str, Any], **kwargs: Any) -> Any:
-        self._asor_timestep = float(self._asor_offline_rows)
-        self._asor_piece(rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics)
-        out = super()._update(batch, **kwargs)
-        self._asor_offline_rows += max(
-            (len(batch[pid][Columns.REWARDS]) for pid in self._asor_piece.aux_ids if pid in batch),
-            default=0,
-        )
-        return out
+    asor_adapter = CQLAsorAdapter()

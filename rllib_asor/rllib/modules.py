@@ -20,6 +20,7 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.core.rl_module.apis import SelfSupervisedLossAPI
 from ray.rllib.core.rl_module.torch import TorchRLModule
 
+from rllib_asor.algorithms.common.asor_adapter import DYNAMICS_ID
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.discriminator import Discriminator, discriminator_loss
 from rllib_asor.asor.encoding import flat_dim, select_space
@@ -28,7 +29,6 @@ from rllib_asor.asor.update import AsorState
 
 LABEL = "asor_label"
 ACTION_FEATURES = "asor_action"
-DYNAMICS_ID = "asor_dynamics_id"
 
 
 @contextlib.contextmanager

@@ -1,5 +1,6 @@
 """The fast off-policy path (docs/speed.md): flat replay buffer, concat-MLP critics, several
-gradient steps per Learner call at the same update-to-data ratio, and with_asor using it.
+gradient steps per Learner call at the same update-to-data ratio, FastSACConfig, and with_asor
+keeping the path its config is on.
 
 The learning check (stock vs fast path on Pendulum, several seeds) is marked `slow`."""
 
@@ -102,10 +103,10 @@ def test_flat_transitions_slice_like_episodes_for_sharding():
     assert tail.columns[Columns.REWARDS][0] == 4.0
 
 
-def _sac(env: str = "Pendulum-v1", **training) -> SACConfig:
+def _sac(env: str = "Pendulum-v1", base: type = SACConfig, **training) -> SACConfig:
     training.setdefault("replay_buffer_config", {"type": "EpisodeReplayBuffer", "capacity": 5000})
     return (
-        SACConfig()
+        base()
         .environment(env)
         .env_runners(num_env_runners=0)
         .training(
@@ -140,14 +141,15 @@ def test_fast_off_policy_leaves_prioritized_and_n_step_replay_to_rllib():
     assert cfg.rl_module_spec.module_class is FastSACTorchRLModule  # the critics still
 
 
-def test_with_asor_uses_the_fast_path_for_sac_unless_opted_out():
-    on = rllib_asor.with_asor(_sac())
-    assert on.learner_config_dict[FAST_KEY] is True
-    assert on.replay_buffer_config["storage"] == "flat"
-    off = rllib_asor.with_asor(fast_off_policy(_sac(), enabled=False))
-    assert off.learner_config_dict[FAST_KEY] is False
-    assert "storage" not in off.replay_buffer_config
-    assert off.train_batch_size_per_learner == 32
+def test_with_asor_keeps_the_path_its_config_is_on():
+    for fast in (fast_off_policy(_sac()), _sac(base=rllib_asor.FastSACConfig).on_fast_path()):
+        on = rllib_asor.with_asor(fast)
+        assert on.learner_config_dict[FAST_KEY] is True
+        assert on.replay_buffer_config["storage"] == "flat"
+    stock = rllib_asor.with_asor(_sac())
+    assert FAST_KEY not in stock.learner_config_dict
+    assert "storage" not in stock.replay_buffer_config
+    assert stock.train_batch_size_per_learner == 32
 
 
 def test_concat_critic_is_one_mlp_on_obs_and_action():
@@ -169,8 +171,8 @@ def test_greedy_action_and_v_of_s_use_the_squashed_mean():
     ours (and ASOR's V(s)) use tanh(μ), the mode of what the policy samples."""
     from ray.rllib.core.distribution.torch.torch_distribution import TorchSquashedGaussian
 
+    from rllib_asor.algorithms.sac.asor_adapter import soft_q_state_values
     from rllib_asor.evaluation.rollout import deterministic_sample
-    from rllib_asor.rllib.learners import soft_q_state_values
 
     logits = torch.tensor([[3.0, -0.5, 0.1, 0.2]])
     assert not torch.allclose(  # the upstream behaviour this works around
@@ -228,7 +230,7 @@ def test_fast_sac_trains_one_gradient_step_per_env_step_and_restores(ray_session
 
 
 def test_fast_sac_asor_runs_asor_once_per_learner_call(ray_session):
-    algo = rllib_asor.with_asor(_sac(), lambda_=0.05).build_algo()
+    algo = rllib_asor.with_asor(_sac(base=rllib_asor.FastSACConfig), lambda_=0.05).build_algo()
     try:
         learner = algo.learner_group._learner
         piece_calls = []
@@ -370,7 +372,8 @@ def test_sac_asor_with_one_aux_minibatch_per_call_learns_pendulum(ray_session):
 def test_fast_sac_asor_trains_on_a_remote_learner(ray_session):
     """FlatTransitions travel to a Learner actor (num_learners=1) like episodes do.
     (2 DDP Learners with ASOR fail on RLlib's stock path as well: docs/algorithm.md.)"""
-    config = rllib_asor.with_asor(_sac().learners(num_learners=1, num_cpus_per_learner=0.5))
+    config = _sac(base=rllib_asor.FastSACConfig).learners(num_learners=1, num_cpus_per_learner=0.5)
+    config = rllib_asor.with_asor(config)
     algo = config.build_algo()
     try:
         assert type(algo.local_replay_buffer) is FlatReplayBuffer

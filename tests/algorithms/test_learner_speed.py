@@ -132,7 +132,7 @@ def test_without_the_drop_ppo_still_trains_the_masked_rows(ray_session):
         assert policy_rows > 2 * result["env_runners"]["num_env_steps_sampled"]
         # The aux modules leave the iterator after their one pass (aux_epochs unset).
         disc_rows = result["learners"][DISC]["num_module_steps_trained"]
-        size = algo.learner_group._learner._asor_piece.aux_batch_sizes[DISC]
+        size = algo.learner_group._learner._asor_aux_sizes[DISC]
         assert size <= disc_rows < size + 64
     finally:
         algo.stop()

@@ -219,12 +219,12 @@ def test_the_proxy_is_trained_on_the_batch_and_the_policy_keeps_its_minibatches(
     assert not torch.equal(proxy.predictor[0].weight, w)
     assert not any(p.requires_grad for p in proxy.target.parameters())
     # the proxy's batch is the policy's 60 valid rows, trained once (aux_epochs unset)
-    piece = lrn._asor_piece
-    assert piece.aux_batch_sizes[PROXY] == 60 and lrn.aux_rows(PROXY) == 60
+    sizes = lrn._asor_aux_sizes  # read from the batch the piece wrote
+    assert sizes[PROXY] == 60 and lrn.aux_rows(PROXY) == 60
     assert lrn._asor_rows_trained[PROXY] == 60
-    assert piece.aux_batch_sizes[DISC] > 60  # archive states + the batch
+    assert sizes[DISC] > 60  # archive states + the batch
     # two epochs of the 60-row (plus bootstrap rows) policy batch in minibatches of 30
-    assert lrn._asor_rows_trained[DISC] >= piece.aux_batch_sizes[DISC]
+    assert lrn._asor_rows_trained[DISC] >= sizes[DISC]
     opt = lrn.get_optimizer(DISC)
     assert isinstance(opt, torch.optim.Adam) and opt.param_groups[0]["weight_decay"] == 1e-4
     assert lrn.get_optimizer(PROXY).param_groups[0]["weight_decay"] == 0.0
@@ -626,7 +626,7 @@ def test_the_policy_gets_its_minibatches_when_the_discriminator_batch_is_longer(
     update(lrn, episodes(0))  # fills the archive
     seen = policy_batches_seen(monkeypatch, lrn)
     update(lrn, episodes(1), step=120, minibatch_size=10)
-    disc_rows = lrn._asor_piece.aux_batch_sizes[DISC]
+    disc_rows = lrn._asor_aux_sizes[DISC]
     assert disc_rows > 66  # archive states + the whole batch
     # 2 epochs of 66 rows in minibatches of 10: 14, as without ASOR (2 epochs of the
     # discriminator's rows would be more)

@@ -1,6 +1,7 @@
-"""The bonus is normalised and shaped in one place (`asor.update`): MAPLE's bonus on its SAC
-rows is `asor_update`'s own reward delta when those rows are the ranked ones, for every
-normalisation and shaping."""
+"""The bonus is normalised and shaped in one place (`asor.update`): the piece's bonus on
+rows other than the ranked ones (MAPLE's SAC rows, `connector.bonus_on_rows`) is
+`asor_update`'s own reward delta when those rows are the ranked ones, for every normalisation
+and shaping."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import torch
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.reward import potential_shaping, reward_bonus, standardize
 from rllib_asor.asor.update import AsorState, asor_update
-from rllib_asor.rllib.maple_asor import maple_asor_bonus, real_batch
+from tests.rllib.test_soft_q_glue import maple_asor_bonus, real_batch
 
 
 def _real(n: int = 48, seed: int = 0):

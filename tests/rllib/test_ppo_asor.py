@@ -332,7 +332,7 @@ def test_policy_gets_num_epochs_even_when_the_discriminator_batch_is_longer(robu
         shuffle_batch_per_epoch=True,
     )
     steps = max(int(s["step"]) for s in optimizer.state.values()) - before
-    assert learner._asor_piece.aux_batch_sizes[DISC] > policy_rows
+    assert learner._asor_aux_sizes[DISC] > policy_rows
     assert steps == math.ceil(2 * policy_rows / 64)
 
 

@@ -20,21 +20,68 @@ from ray.rllib.core.models.base import ENCODER_OUT
 
 import rllib_asor
 from rllib_asor.algorithms.escp.module import escp_state_values
+from rllib_asor.algorithms.sac.asor_adapter import soft_q_state_values
 from rllib_asor.algorithms.sac.fast import fast_off_policy
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY, FlatTransitions
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.proxy import ProxyInputs, make_proxy
 from rllib_asor.asor.reward import potential_shaping, reward_bonus, standardize
-from rllib_asor.asor.update import AsorState
+from rllib_asor.asor.update import AsorBatch, AsorResult, AsorState, asor_update
 from rllib_asor.rllib import connector
-from rllib_asor.rllib.learners import disc_module_id, proxy_module_id, soft_q_state_values
-from rllib_asor.rllib.maple_asor import maple_asor_bonus, real_batch
+from rllib_asor.rllib.learners import disc_module_id, proxy_module_id
 from tests.rllib.test_glue_behaviour import policy_batches_seen
 
 OBS = gym.spaces.Box(-10, 10, (3,), np.float32)
 BOX = gym.spaces.Box(-1, 1, (2,), np.float32)
 DISC, PROXY = disc_module_id(DEFAULT_MODULE_ID), proxy_module_id(DEFAULT_MODULE_ID)
 SMALL = {"disc_hiddens": [16], "rnd_hiddens": [16], "rnd_embedding_dim": 8, "seed": 0}
+
+
+def real_batch(
+    features: torch.Tensor,
+    next_features: torch.Tensor,
+    rewards: torch.Tensor,
+    terminateds: torch.Tensor,
+    values: torch.Tensor,
+    gamma: float,
+    timestep: float,
+    actions: torch.Tensor | None = None,
+    dynamics_ids: torch.Tensor | None = None,
+) -> AsorBatch:
+    """An `AsorBatch` of real transitions (what the piece ranks for MAPLE)."""
+    return AsorBatch(
+        features=features,
+        env_rewards=rewards,
+        values=values,
+        gamma=gamma,
+        timestep=timestep,
+        proxy_inputs=ProxyInputs(features, actions, next_features, dynamics_ids),
+        next_features=next_features,
+        terminateds=terminateds,
+    )
+
+
+def maple_asor_bonus(
+    cfg: AsorConfig,
+    state: AsorState,
+    proxy: torch.nn.Module | None,
+    real: AsorBatch,
+    obs: torch.Tensor,
+    next_obs: torch.Tensor,
+    terminateds: torch.Tensor,
+    valid: torch.Tensor,
+    rng: np.random.Generator,
+) -> tuple[torch.Tensor, AsorResult]:
+    """What the piece does with MAPLE's adapter: ASOR's update on the real rows, then the
+    bonus of every valid row of the SAC batch (`connector.bonus_on_rows`)."""
+    result = asor_update(cfg, state, proxy, real, rng)
+    rows = {
+        Columns.OBS: obs,
+        Columns.NEXT_OBS: next_obs,
+        Columns.TERMINATEDS: terminateds,
+        "valid": valid,
+    }
+    return connector.bonus_on_rows(cfg, state, result.lam, rows, real.gamma), result
 
 
 def sac_learner(action_space: gym.Space = BOX, batch: int = 32, gamma: float = 0.99, **asor):
@@ -195,7 +242,7 @@ def test_aux_modules_take_one_minibatch_per_call_unless_aux_epochs_is_set(monkey
     learner = sac_learner(aux_epochs=2)
     rows.clear()
     update(learner, transitions(96))
-    sizes = learner._asor_piece.aux_batch_sizes
+    sizes = learner._asor_aux_sizes
     assert learner.aux_rows(PROXY) == 2.0 * sizes[PROXY] == 192.0
     assert rows[PROXY] == 96  # capped by the 3 minibatches there are
 
@@ -412,8 +459,7 @@ def test_cql_lambda_schedule_follows_the_dataset_rows_trained_on(monkeypatch):
     env = torch.from_numpy(cols[Columns.REWARDS])
     torch.testing.assert_close(seen[0][Columns.REWARDS], env)
     assert (seen[1][Columns.REWARDS] < env).all()
-    assert learner._asor_offline_rows == 64
-    assert learner._asor_timestep == 32.0
+    assert learner._asor_piece.rows_ranked == 64  # λ's timestep for the next batch
 
 
 # ------------------------------------------------------------------ MAPLE's Learner
@@ -458,22 +504,37 @@ def maple_batch(learner, seed: int = 0, segments: int = 6, steps: int = 4, real:
     return cols, MultiAgentBatch({DEFAULT_MODULE_ID: SampleBatch(cols)}, env_steps=b)
 
 
+def maple_piece_spies(monkeypatch) -> tuple[list, list]:
+    """Record what the ASOR piece ranks (batch, discriminator before, result) and the rows it
+    gives the bonus to."""
+    calls, rows = [], []
+    real_update, real_bonus = connector.asor_update, connector.bonus_on_rows
+
+    def update_spy(cfg, state, proxy, batch, rng):
+        calls.append((batch, copy.deepcopy(state.disc)))
+        out = real_update(cfg, state, proxy, batch, rng)
+        calls[-1] += (out,)
+        return out
+
+    def bonus_spy(cfg, state, lam, bonus_rows, gamma):
+        rows.append(bonus_rows)
+        return real_bonus(cfg, state, lam, bonus_rows, gamma)
+
+    monkeypatch.setattr(connector, "asor_update", update_spy)
+    monkeypatch.setattr(connector, "bonus_on_rows", bonus_spy)
+    return calls, rows
+
+
 def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_step(monkeypatch):
     from rllib_asor.algorithms.maple import learner as maple_learner_module
     from rllib_asor.algorithms.maple.losses import state_values
-    from rllib_asor.rllib import maple_asor
 
     learner = maple_learner(preset="paper", lambda_=0.1)
     nets = learner.module[DEFAULT_MODULE_ID].unwrapped().nets
-    calls, bonuses, aux = [], [], []
-    real_bonus, real_losses = maple_asor.maple_asor_bonus, maple_learner_module.maple_losses
+    bonuses, aux = [], []
+    calls, rows = maple_piece_spies(monkeypatch)
+    real_losses = maple_learner_module.maple_losses
     real_update = maple_learner_module.MapleTorchLearner._update
-
-    def bonus_spy(cfg, state, proxy, real, *args):
-        calls.append((real, args, copy.deepcopy(state.disc)))
-        out = real_bonus(cfg, state, proxy, real, *args)
-        calls[-1] += (out[1],)
-        return out
 
     def losses_spy(nets_, b, **kw):
         bonuses.append(kw["bonus"].clone())
@@ -483,7 +544,6 @@ def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_st
         aux.append({m: {k: v.clone() for k, v in batch[m].items()} for m in (DISC, PROXY)})
         return real_update(self, batch, **kw)
 
-    monkeypatch.setattr(maple_asor, "maple_asor_bonus", bonus_spy)
     monkeypatch.setattr(maple_learner_module, "maple_losses", losses_spy)
     monkeypatch.setattr(maple_learner_module.MapleTorchLearner, "_update", update_spy)
     disc, proxy = params(learner.module[DISC]), params(learner.module[PROXY])
@@ -496,22 +556,22 @@ def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_st
     for i in (1, 2):
         later = learner.update(batch=maple_batch(learner, seed=i)[1], timesteps={"s": i})
 
-    real, (obs, next_obs, terminateds, valid, _), disc_before, result = calls[0]
+    real, disc_before, result = calls[0]
     torch.testing.assert_close(real.features, t["real_obs"])
     torch.testing.assert_close(real.next_features, t["real_next_obs"])
     torch.testing.assert_close(real.env_rewards, t["real_rewards"])
     assert torch.equal(real.terminateds, t["real_terminateds"])
-    torch.testing.assert_close(real.proxy_inputs.actions, t["real_actions"])
-    assert torch.equal(real.proxy_inputs.dynamics_ids, t["real_dynamics_ids"])
+    torch.testing.assert_close(real.proxy_inputs.features, t["real_obs"])
     torch.testing.assert_close(real.values, expected_values)
     assert real.gamma == pytest.approx(learner.config.gamma)
     # λ's timestep: the dataset rows ranked so far
     assert [c[0].timestep for c in calls] == [0.0, 24.0, 48.0]
     # each update reports its own ASOR statistics (not a mean over updates)
-    assert later[DISC]["value_mean"].peek() == pytest.approx(calls[2][3].metrics["value_mean"])
-    torch.testing.assert_close(obs, t["obs"])
-    torch.testing.assert_close(next_obs, t["next_obs"])
-    assert torch.equal(valid, t["valid"]) and torch.equal(terminateds, t["terminateds"])
+    assert later[DISC]["value_mean"].peek() == pytest.approx(calls[2][2].metrics["value_mean"])
+    torch.testing.assert_close(rows[0][Columns.OBS], t["obs"])
+    torch.testing.assert_close(rows[0][Columns.NEXT_OBS], t["next_obs"])
+    assert torch.equal(rows[0]["valid"], t["valid"])
+    assert torch.equal(rows[0][Columns.TERMINATEDS], t["terminateds"])
 
     # every valid step, real or model, gets λ·log ω from the discriminator before its step
     with torch.no_grad():
@@ -527,22 +587,29 @@ def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_st
     assert results[DISC]["lambda"].peek() == pytest.approx(0.1)
 
 
+@pytest.mark.parametrize("proxy", ["ensemble", "rnd_per_dynamics"])
+def test_maple_proxy_gets_the_real_actions_next_states_and_dynamics_ids(monkeypatch, proxy):
+    learner = maple_learner(preset="paper", lambda_=0.1, proxy=proxy)
+    calls, _ = maple_piece_spies(monkeypatch)
+    cols, batch = maple_batch(learner)
+    learner.update(batch=batch, timesteps={"maple_gradient_steps": 0})
+    inputs = calls[0][0].proxy_inputs
+    t = {k: torch.from_numpy(v) for k, v in cols.items()}
+    torch.testing.assert_close(inputs.features, t["real_obs"])
+    if proxy == "ensemble":
+        torch.testing.assert_close(inputs.actions, t["real_actions"])
+        torch.testing.assert_close(inputs.next_features, t["real_next_obs"])
+    else:
+        assert torch.equal(inputs.dynamics_ids, t["real_dynamics_ids"])
+
+
 def test_maple_asor_partition_follows_the_asor_seed(monkeypatch):
     """`mode: random` draws D_P from the Learner's generator, seeded by `asor.seed`."""
-    from rllib_asor.rllib import maple_asor
-
-    labels = []
-    real_bonus = maple_asor.maple_asor_bonus
-
-    def spy(*args):
-        out = real_bonus(*args)
-        labels.append(out[1].disc_labels.clone())
-        return out
-
-    monkeypatch.setattr(maple_asor, "maple_asor_bonus", spy)
+    calls, _ = maple_piece_spies(monkeypatch)
     for seed in (0, 0, 1):
         learner = maple_learner(preset="paper", mode="random", lambda_=0.1, seed=seed)
         learner.update(batch=maple_batch(learner)[1], timesteps={"maple_gradient_steps": 0})
+    labels = [c[2].disc_labels for c in calls]
     assert torch.equal(labels[0], labels[1]) and not torch.equal(labels[0], labels[2])
 
 

@@ -19,7 +19,7 @@ from rllib_asor.algorithms.maple.segments import (
 )
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.update import AsorState
-from rllib_asor.rllib.maple_asor import maple_asor_bonus, real_batch
+from tests.rllib.test_soft_q_glue import maple_asor_bonus, real_batch
 
 
 def _episode(t: int, start: float, done: bool, obs_dim: int = 2) -> tuple:
