@@ -101,7 +101,18 @@ class IndexSelectShuffleBatch(SampleBatch):
         if self.get(SampleBatch.SEQ_LENS) is not None or Columns.INFOS in self:
             return super().shuffle()
         index = torch.from_numpy(np.random.permutation(self.count))
-        self.update(tree.map_structure(lambda column: take_rows(column, index), dict(self)))
+        columns = dict(self)
+        # One host-to-device copy of the permutation per device, not one per column (on a GPU
+        # each such copy waits for the stream).
+        devices = {c.device for c in tree.flatten(columns) if isinstance(c, torch.Tensor)}
+        on = {device: index.to(device) for device in devices}
+
+        def take(column: Any) -> Any:
+            return take_rows(
+                column, on[column.device] if isinstance(column, torch.Tensor) else index
+            )
+
+        self.update(tree.map_structure(take, columns))
         self.intercepted_values = {}
         return self
 
