@@ -59,7 +59,7 @@ class ExperimentSpec(BaseModel):
     num_env_steps_sampled_lifetime, env_runners/episode_return_mean, time_total_s, ...)."""
     config: dict[str, Any] = {}
     """The AlgorithmConfig settings by name (old names are translated with a warning), any
-    value may be `{grid_search: [...]}`; our own blocks: `asor:`, `escp:`, `maple:`, `dara:`."""
+    value may be `{grid_search: [...]}`; our own blocks: `asor:`, `escp:`, `maple:`, `dara:`, `osi:`."""
     checkpoint_config: CheckpointSettings = CheckpointSettings()
     """When checkpoints are saved and how many are kept."""
     num_samples: Annotated[int, Field(ge=1), Allowed("an integer >= 1")] = 1
@@ -101,6 +101,9 @@ SETTINGS_BLOCKS: dict[str, SettingsBlock] = {
     ),
     "dara": SettingsBlock(
         "rllib_asor.algorithms.dara.settings:DaraSettings", ("MAPLE", "MOPO"), "dara_settings"
+    ),
+    "osi": SettingsBlock(
+        "rllib_asor.algorithms.osi.settings:OsiSettings", ("OSI",), "osi_settings"
     ),
 }
 """Our `config:` blocks by name; validate.py checks each, `rllib schema` describes each."""
