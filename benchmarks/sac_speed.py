@@ -111,13 +111,17 @@ class Sb3Runner:
 
 
 def sac_config(
-    args: argparse.Namespace, env_id: str = ENV_ID, env_config: dict[str, Any] | None = None
+    args: argparse.Namespace,
+    env_id: str = ENV_ID,
+    env_config: dict[str, Any] | None = None,
+    config_class: type | None = None,
 ) -> Any:
-    """RLlib SAC with the shared settings (what a user writes for SB3-like SAC)."""
+    """RLlib SAC with the shared settings (what a user writes for SB3-like SAC); a
+    `config_class` such as `FastSACConfig` instead of `SACConfig`."""
     from ray.rllib.algorithms.sac import SACConfig
 
     return (
-        SACConfig()
+        (config_class or SACConfig)()
         .environment(env_id, env_config=env_config or {"params": ENV_PARAMS})
         .env_runners(num_env_runners=0, num_envs_per_env_runner=1)
         .learners(num_learners=0)
