@@ -1,9 +1,11 @@
 """rllib-asor: ASOR (ICML 2025) as an add-on for Ray RLlib's new API stack.
 
 `rllib_asor.with_asor(algo_config, **settings)` switches ASOR on for an RLlib config;
-`rllib_asor.AsorConfig` holds the settings; `rllib_asor.asor` is the method itself (torch +
-numpy, no ray). Importing the package registers our gymnasium ids (`rllib_asor/LavaWorld-v0`,
-...; entry points only, nothing heavy); everything else is imported lazily.
+`rllib_asor.AsorConfig` holds the settings; `rllib_asor.FastSACConfig` is SAC on our fast
+off-policy path (a choice for both arms: `with_asor` never changes the base algorithm);
+`rllib_asor.asor` is the method itself (torch + numpy, no ray). Importing the package registers
+our gymnasium ids (`rllib_asor/LavaWorld-v0`, ...; entry points only, nothing heavy);
+everything else is imported lazily.
 """
 
 from __future__ import annotations
@@ -18,11 +20,13 @@ if TYPE_CHECKING:
     from rllib_asor.algorithms.escp.config import EscpConfig
     from rllib_asor.algorithms.maple.maple import MapleConfig, MopoConfig
     from rllib_asor.algorithms.osi.config import OsiConfig
+    from rllib_asor.algorithms.sac.config import FastSACConfig
     from rllib_asor.asor.config import AsorConfig
 
 __all__ = [
     "AsorConfig",
     "EscpConfig",
+    "FastSACConfig",
     "MapleConfig",
     "MopoConfig",
     "OsiConfig",
@@ -76,6 +80,10 @@ def __getattr__(name: str) -> Any:
         from rllib_asor.algorithms.escp.config import EscpConfig
 
         return EscpConfig
+    if name == "FastSACConfig":  # SAC on the fast off-policy path, imported on first use
+        from rllib_asor.algorithms.sac.config import FastSACConfig
+
+        return FastSACConfig
     if name == "OsiConfig":  # UP-OSI, imported on first use
         from rllib_asor.algorithms.osi.config import OsiConfig
 

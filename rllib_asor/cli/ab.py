@@ -1,7 +1,9 @@
 """`rllib ab FILE.yaml --seeds N [--vs FILE2.yaml]`: does the file's `asor:` block help?
 
 One Tune run trains the file's experiment with and without its `asor:` block (or against the
-experiment of `--vs FILE2.yaml`) on seeds 0..N-1, both arms with the same seeds, greedy
+experiment of `--vs FILE2.yaml`) on seeds 0..N-1, both arms with the same seeds and, without
+`--vs`, the same algorithm in every other respect (module, replay, critics, update rhythm:
+checked before the run, `arm_differences`), greedy
 evaluation during training (RLlib's evaluation env runners, returns per ``dynamics_id``), then
 every final checkpoint is evaluated on the same episodes (`evaluation.json` per trial) and
 `rllib compare` prints the paired result; tables and figures go to ``<experiment>/ab/``.
@@ -95,7 +97,45 @@ def arms(args: argparse.Namespace) -> list[tuple[str, Any]]:
         )
     base = copy.deepcopy(treat)
     base.asor = None
+    _same_replay_path(base, treat)
     return [(treat.run, base), (f"{treat.run}+ASOR", treat)]
+
+
+def _same_replay_path(base: Any, treat: Any) -> None:
+    """A `run: SAC`/`CQL` file whose asor block trains per-dynamics RND keeps RLlib's replay
+    (cli/build.py): its baseline, which has no asor block, must keep it too."""
+    from rllib_asor.algorithms.sac.fast import FAST_KEY
+    from rllib_asor.cli.build import per_dynamics_rnd
+
+    if treat.run in ("SAC", "CQL") and per_dynamics_rnd(treat):
+        for exp in (base, treat):
+            lcd = exp.config.get("learner_config_dict")
+            exp.config["learner_config_dict"] = {**(lcd or {}), FAST_KEY: False}
+
+
+def arm_check(named: list[tuple[str, Any, Any]], vs: bool) -> str | None:
+    """What besides ASOR tells the arms apart: None when the baseline has an asor block too or
+    the treatment none (nothing to check), else a line to print. Without `--vs` the arms come
+    from one file and must differ only in ASOR: UsageError otherwise."""
+    from rllib_asor.rllib.wiring import arm_differences, with_asor
+
+    (_, base_exp, base), (_, treat_exp, treat) = named
+    if base_exp.asor is not None or treat_exp.asor is None:
+        return None
+    try:
+        differences = arm_differences(base, with_asor(treat, **treat_exp.asor))
+    except ValueError as e:
+        raise UsageError(
+            str(e), source=treat_exp.source, key=f"{treat_exp.name}.config.asor"
+        ) from None
+    if not differences:
+        return "rllib ab: the arms differ only in ASOR (same module, replay, critics and rhythm)"
+    if not vs:
+        raise UsageError(
+            f"the arms would differ in more than ASOR: {', '.join(differences)}; allowed: none",
+            source=treat_exp.source,
+        )
+    return f"rllib ab: besides ASOR, the arms differ in: {', '.join(differences)}"
 
 
 def _prepare(exp: Any, args: argparse.Namespace) -> Any:
@@ -122,6 +162,15 @@ def _prepare(exp: Any, args: argparse.Namespace) -> Any:
     algo_config = experiment.validate(exp)
     add_callbacks(algo_config, DynamicsReturnsCallback)
     return algo_config
+
+
+def prepared_arms(args: argparse.Namespace) -> list[tuple[str, Any, Any]]:
+    """[(name, experiment, validated config)] of the baseline and the treatment."""
+    (base_name, base), (treat_name, treat) = arms(args)
+    treat_config = _prepare(treat, args)
+    if not args.vs and "input" in treat.config:  # --test's stand-in datasets: one set for both
+        base.config["input"] = treat.config["input"]
+    return [(base_name, base, _prepare(base, args)), (treat_name, treat, treat_config)]
 
 
 def param_space(named: list[tuple[str, Any, Any]], seeds: int) -> dict[str, Any]:
@@ -273,10 +322,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"{args.seeds} is invalid: allowed an integer >= 2", key="--seeds")
     if args.episodes < 1:
         raise UsageError(f"{args.episodes} is invalid: allowed an integer >= 1", key="--episodes")
-    pairs = arms(args)
-    named = [(name, exp, _prepare(exp, args)) for name, exp in pairs]
+    named = prepared_arms(args)
+    check = arm_check(named, vs=bool(args.vs))
     trainable = trainable_for(named, args.file)
-    exp = pairs[-1][1]
+    exp = named[-1][1]
     root = os.path.abspath(
         os.path.expanduser(args.storage_path or exp.storage_path or DEFAULT_STORAGE)
     )
@@ -289,6 +338,8 @@ def run(args: argparse.Namespace) -> int:
         f"({2 * args.seeds} trials), results in {path}",
         flush=True,
     )
+    if check:
+        print(check, flush=True)
     os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
     started = start_ray(None, max(required_cpus(c) for _, _, c in named))
     try:

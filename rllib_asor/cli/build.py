@@ -194,14 +194,78 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
 
             if drop_enabled(cfg):
                 cfg = drop_bootstrap_rows(cfg)
-        if exp.asor is None and exp.run in ("SAC", "CQL"):  # with_asor does it for ASOR runs
-            from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
-
-            # The fast off-policy path (docs/speed.md) unless the file opts out
-            # with `learner_config_dict: {fast_off_policy: false}`.
-            if (cfg.learner_config_dict or {}).get(FAST_KEY) is not False:
-                cfg = fast_off_policy(cfg)
+        if exp.run in FAST_RUNS:
+            cfg = _fast_path(cfg, exp)
     return cfg
+
+
+FAST_RUNS = ("SAC", "CQL", "FastSAC")
+"""Runs whose files go on the fast off-policy path (docs/speed.md), with and without ASOR."""
+_said_fast: set[str] = set()
+
+
+def _fast_path(cfg: Any, exp: Experiment) -> Any:
+    """`run: FastSAC` on the fast off-policy path; `run: SAC` / `run: CQL` too unless the file
+    opts out with `learner_config_dict: {fast_off_policy: false}` or its asor block trains
+    per-dynamics RND. Both arms of a comparison get the same path (`with_asor` never changes
+    it); a `run: SAC`/`CQL` file says which once."""
+    from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
+
+    per_dynamics = per_dynamics_rnd(exp)
+    if exp.run == "FastSAC":
+        if per_dynamics:
+            raise UsageError(
+                "rnd_per_dynamics needs each step's dynamics id, which FastSAC's flat replay "
+                "buffer does not keep; allowed: another proxy, or run: SAC with "
+                f"learner_config_dict: {{{FAST_KEY}: false}}",
+                source=exp.source,
+                key=f"{exp.name}.config.asor.proxy",
+            )
+        return fast_off_policy(cfg)
+    if (cfg.learner_config_dict or {}).get(FAST_KEY) is False:
+        return cfg
+    if per_dynamics:
+        _say_once(
+            exp.run,
+            f"run: {exp.run} keeps RLlib's own replay and critics: the asor block's "
+            "rnd_per_dynamics needs each step's dynamics id, which the fast path's flat buffer "
+            "does not keep",
+        )
+        return cfg
+    _say_once(
+        exp.run,
+        f"run: {exp.run} runs on the fast off-policy path (docs/speed.md), with and without "
+        f"ASOR; learner_config_dict: {{{FAST_KEY}: false}} gives RLlib's own {exp.run}",
+    )
+    return fast_off_policy(cfg)
+
+
+def _say_once(run: str, note: str) -> None:
+    import sys
+
+    if run not in _said_fast:
+        _said_fast.add(run)
+        print(f"rllib: note: {note}", file=sys.stderr)
+
+
+def per_dynamics_rnd(exp: Experiment) -> bool:
+    """Whether a candidate of the file's asor block trains per-dynamics RND (it reads each
+    step's dynamics id)."""
+    if exp.asor is None:
+        return False
+    from rllib_asor.asor.config import AsorConfig
+
+    points: list[dict[grid.Path, Any]] = [{}]
+    for path, candidates in grid.find_grids(exp.asor):
+        points += [{path: c} for c in candidates]
+    for choice in points:
+        try:
+            asor = AsorConfig.from_dict(grid.with_candidates(exp.asor, choice))
+        except (ValueError, TypeError):
+            continue  # validate_asor names it
+        if asor.needs_proxy and asor.proxy == "rnd_per_dynamics":
+            return True
+    return False
 
 
 def _curriculum(block: Any, exp: Experiment) -> Any:

@@ -47,10 +47,11 @@ def validate_asor(exp: Experiment) -> None:
     if exp.asor is None:
         return
     from rllib_asor.asor.config import ALGORITHMS, AsorConfig
+    from rllib_asor.rllib.wiring import supported_run
 
-    if exp.run not in ALGORITHMS:
+    if supported_run(exp.run) is None:  # ALGORITHMS or a subclass of one (FastSAC)
         raise UsageError(
-            f"ASOR does not support {exp.run!r}; allowed: {', '.join(ALGORITHMS)}",
+            f"ASOR does not support {exp.run!r}; allowed: {', '.join(ALGORITHMS)}, FastSAC",
             source=exp.source,
             key=f"{exp.name}.run",
         )

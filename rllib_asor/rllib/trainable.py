@@ -15,7 +15,7 @@ from ray.tune.registry import get_trainable_cls
 
 from rllib_asor.algorithms.ppo.overlap import OverlappedPPO
 from rllib_asor.registry.algorithms import register_algorithms
-from rllib_asor.rllib.wiring import SUPPORTED, with_asor
+from rllib_asor.rllib.wiring import SUPPORTED, supported_run, with_asor
 
 ASOR_KEY = "asor"
 
@@ -36,7 +36,7 @@ def _asor_init(base: type[Algorithm]) -> Any:
 def asor_trainable(run: str) -> type[Algorithm]:
     """The Algorithm class for `run` ("PPO", ...) that applies an `"asor"` config block; a
     block that is None leaves the plain algorithm (one trainable for both arms of `rllib ab`)."""
-    if run not in SUPPORTED:
+    if supported_run(run) is None:  # SUPPORTED or a subclass of one (FastSAC)
         raise ValueError(
             f"ASOR does not support run={run!r}: supported {', '.join(sorted(SUPPORTED))}"
         )
@@ -57,6 +57,6 @@ def asor_trainable(run: str) -> type[Algorithm]:
 
 def __getattr__(name: str) -> Any:
     """Unpickling `rllib_asor.rllib.trainable.AsorPPO` recreates the class on demand."""
-    if name.startswith("Asor") and name[4:] in SUPPORTED:
+    if name.startswith("Asor") and supported_run(name[4:]) is not None:
         return asor_trainable(name[4:])
     raise AttributeError(name)

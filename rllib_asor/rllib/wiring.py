@@ -6,10 +6,13 @@ What it wires in:
   in the MultiRLModule (`asor_disc.<policy>`, `asor_proxy.<policy>`),
 - the validated settings in `learner_config_dict["asor"]` (pickled into every Learner and
   checkpoint),
-- a callback that lifts the Learner's ASOR statistics to `asor/...` in the results,
-- for SAC and CQL the fast off-policy path (`fast_off_policy`, rllib_asor/algorithms/sac/fast.py:
-  concat-MLP critics, flat replay buffer, batch built without the connector walk), unless
-  `learner_config_dict["fast_off_policy"]` is False.
+- a callback that lifts the Learner's ASOR statistics to `asor/...` in the results.
+
+Nothing else: the RLModule class, replay buffer, critics and update rhythm stay those of
+`config`. The ASOR Learner is a subclass of the Learner `config` would use (`asor_learner_class`):
+RLlib's `SACTorchLearner` for a stock `SACConfig()`, `FastSACTorchLearner` for a
+`FastSACConfig()` (rllib_asor/algorithms/sac/config.py, the fast off-policy path as a choice
+made for both arms).
 """
 
 from __future__ import annotations
@@ -19,21 +22,25 @@ import dataclasses
 from typing import Any
 
 from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
+from ray.rllib.callbacks.callbacks import RLlibCallback
 from ray.rllib.core import DEFAULT_MODULE_ID
-from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
+from ray.rllib.core.rl_module.multi_rl_module import MultiRLModule, MultiRLModuleSpec
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
 from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common.callbacks import add_callbacks
-from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
+from rllib_asor.algorithms.sac.fast import FLAT_STORAGE
+from rllib_asor.algorithms.sac.learner import FastSACTorchLearner
 from rllib_asor.asor.config import ALGORITHMS, AsorConfig
 from rllib_asor.registry.env_names import register_env
-from rllib_asor.rllib.callbacks import AsorMetricsCallback
+from rllib_asor.rllib.callbacks import AsorMetricsCallback, DropNaNLearnerStatsCallback
 from rllib_asor.rllib.escp_asor import AsorESCPTorchLearner
 from rllib_asor.rllib.learners import (
     AsorCQLTorchLearner,
+    AsorLearnerMixin,
     AsorPPOTorchLearner,
     AsorSACTorchLearner,
+    FastSoftQAsorMixin,
     disc_module_id,
     is_aux_module,
     proxy_module_id,
@@ -49,6 +56,16 @@ SUPPORTED = {
     "ESCP": AsorESCPTorchLearner,  # ESCP+ASOR, the paper's Algorithm 1
 }
 assert tuple(sorted(SUPPORTED)) == ALGORITHMS, "one list of supported algorithms (asor.config)"
+
+
+class AsorFastSACTorchLearner(FastSoftQAsorMixin, FastSACTorchLearner):
+    """The fast path's SAC Learner (`FastSACConfig`) with ASOR: the piece runs once per Learner
+    call on the batch built from the flat buffer's columns."""
+
+
+SPECIFIC = (AsorFastSACTorchLearner,)
+"""ASOR Learners for Learner subclasses of ours, tried after `SUPPORTED`'s: `asor_learner_class`
+takes the first that subclasses the config's Learner."""
 
 
 class AsorMultiRLModuleSpec(MultiRLModuleSpec):
@@ -82,8 +99,7 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
     if not isinstance(config, AlgorithmConfig):
         raise ValueError(f"with_asor needs an RLlib AlgorithmConfig, got {type(config).__name__}")
     algo = _algorithm_name(config)
-    learner_class = SUPPORTED.get(algo)
-    if learner_class is None:
+    if algo not in SUPPORTED:
         raise ValueError(
             f"ASOR does not support algorithm {algo!r}: supported {', '.join(sorted(SUPPORTED))}"
         )
@@ -92,11 +108,11 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
     if config.framework_str != "torch":
         raise ValueError(f"ASOR needs framework='torch', got {config.framework_str!r}")
 
+    learner_class = asor_learner_class(config, algo)
+    _check_infos(config, asor)
     config = config.copy(copy_frozen=False)
     if isinstance(config.env, str):
         register_env(config.env)  # env runners (other processes, nodes) can then build it
-    if algo in ("SAC", "CQL") and _wants_fast_path(config, asor):
-        config = fast_off_policy(config)
     asor_dict = asor.to_dict()
     config.rl_module(rl_module_spec=_module_spec(config, asor))
     config.learners(
@@ -109,6 +125,41 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
     return config
 
 
+def _check_infos(config: AlgorithmConfig, asor: AsorConfig) -> None:
+    """Per-dynamics RND needs each step's dynamics id, which the fast path's flat replay
+    buffer does not keep: refuse that pair in one line."""
+    if not (asor.needs_proxy and asor.proxy == "rnd_per_dynamics"):
+        return
+    base = compat.user_learner_class(config) or config.get_default_learner_class()
+    rb = getattr(config, "replay_buffer_config", None) or {}  # on-policy configs have none
+    flat = rb.get("storage") == FLAT_STORAGE or (
+        issubclass(base, FastSACTorchLearner) and rb.get("type") == "EpisodeReplayBuffer"
+    )
+    if flat:
+        raise ValueError(
+            "proxy='rnd_per_dynamics' needs each step's dynamics id, which the fast path's flat "
+            "replay buffer does not keep; allowed: another proxy, or RLlib's replay (SACConfig(); "
+            "in YAML run: SAC with learner_config_dict: {fast_off_policy: false})"
+        )
+
+
+def supported_run(run: str) -> str | None:
+    """The supported algorithm ("SAC") that a Tune run name ("SAC", "FastSAC") is or derives
+    from; None for other names and unknown ones."""
+    if run in SUPPORTED:
+        return run
+    from ray.tune.registry import get_trainable_cls
+
+    from rllib_asor.registry.algorithms import register_algorithms
+
+    register_algorithms()
+    try:
+        cls = get_trainable_cls(run)
+    except Exception:  # unknown name: the caller names what is allowed
+        return None
+    return next((c.__name__ for c in getattr(cls, "__mro__", ()) if c.__name__ in SUPPORTED), None)
+
+
 def _algorithm_name(config: AlgorithmConfig) -> str:
     """ "PPO", "SAC", ... for the config's algorithm or a subclass of one (`OverlappedPPO`)."""
     cls = config.algo_class
@@ -117,13 +168,31 @@ def _algorithm_name(config: AlgorithmConfig) -> str:
     return next((c.__name__ for c in cls.__mro__ if c.__name__ in SUPPORTED), cls.__name__)
 
 
-def _wants_fast_path(config: AlgorithmConfig, asor: AsorConfig) -> bool:
-    """SAC/CQL get the fast off-policy path (rllib_asor/algorithms/sac/fast.py) unless the config
-    opts out (`learner_config_dict["fast_off_policy"] = False`) or the proxy needs per-step
-    infos, which the flat replay buffer does not keep (`rnd_per_dynamics`)."""
-    if (config.learner_config_dict or {}).get(FAST_KEY) is False:
-        return False
-    return not (asor.needs_proxy and asor.proxy == "rnd_per_dynamics")
+def asor_learner_class(config: AlgorithmConfig, algo: str | None = None) -> type:
+    """The ASOR Learner for `config`: a subclass of the Learner it would use without ASOR
+    (the user's `learner_class`, else the config's default), so ASOR adds to that Learner and
+    changes nothing of it. A Learner that already has ASOR is kept (`with_asor` twice).
+
+    A Learner of the user's with no ASOR subclass here gets the algorithm's ASOR Learner if
+    that has every base class of the user's (e.g. `LeanPPOTorchLearner`, whose mixin
+    `AsorPPOTorchLearner` has); otherwise ValueError names it and what is allowed.
+    """
+    algo = algo or _algorithm_name(config)
+    base = compat.user_learner_class(config) or config.get_default_learner_class()
+    if isinstance(base, type) and issubclass(base, AsorLearnerMixin):
+        return base
+    default = SUPPORTED[algo]
+    for candidate in (default, *SPECIFIC):
+        if issubclass(candidate, base):
+            return candidate
+    own = [name for name in vars(base) if not name.startswith("__") and name != "_abc_impl"]
+    if not own and all(c in default.__mro__ for c in base.__mro__[1:]):
+        return default  # the user's class adds nothing of its own to bases ASOR's has
+    raise ValueError(
+        f"learner_class={base.__name__} has no ASOR Learner: with_asor would replace it; "
+        f"allowed: leave learner_class unset, or a subclass of {default.__name__} "
+        f"(rllib_asor.rllib.wiring) or of {', '.join(c.__name__ for c in SPECIFIC)}"
+    )
 
 
 class _AlsoTrainAux:
@@ -188,3 +257,81 @@ def _module_spec(config: AlgorithmConfig, asor: AsorConfig) -> AsorMultiRLModule
                 **spaces,
             )
     return AsorMultiRLModuleSpec(**{**keep, "rl_module_specs": specs})
+
+
+# ------------------------------------------------------------------ arms that differ in ASOR
+ADDED_KEYS = (
+    "_learner_class",
+    "learner_config_dict",
+    "_rl_module_spec",
+    "callbacks",
+    "policies_to_train",
+)
+"""`AlgorithmConfig.to_dict()` keys that `with_asor` sets; `arm_differences` checks each."""
+METRICS_CALLBACKS = (AsorMetricsCallback, DropNaNLearnerStatsCallback)
+"""Metrics-only callbacks: `with_asor` adds the first, a run without ASOR may have the second."""
+
+
+def arm_differences(base: AlgorithmConfig, treated: AlgorithmConfig) -> list[str]:
+    """The settings in which `treated` (a config with ASOR) differs from `base` (without it)
+    beyond what `with_asor` adds; [] when the two arms differ only in ASOR.
+
+    What `with_asor` may add: `learner_config_dict["asor"]`, the Learner
+    `asor_learner_class(base)`, the discriminator/proxy module specs beside the unchanged
+    policy specs, `AsorMetricsCallback`, and `policies_to_train` that also trains its modules.
+    """
+    a, b = base.to_dict(), treated.to_dict()
+    out = [
+        k for k in sorted(set(a) | set(b)) if k not in ADDED_KEYS and not _same(a.get(k), b.get(k))
+    ]
+    if treated.learner_class is not asor_learner_class(base):
+        out.append("learner_class")
+    lcd = {k: v for k, v in (treated.learner_config_dict or {}).items() if k != "asor"}
+    if not _same(lcd, dict(base.learner_config_dict or {})):
+        out.append("learner_config_dict")
+    if _plain_callbacks(base) != _plain_callbacks(treated):
+        out.append("callbacks")
+    if not _same(_policy_specs(base), _policy_specs(treated)):
+        out.append("rl_module_spec")
+    user = treated.policies_to_train
+    if not _same(user.user if isinstance(user, _AlsoTrainAux) else user, base.policies_to_train):
+        out.append("policies_to_train")
+    return out
+
+
+def _same(x: Any, y: Any) -> bool:
+    try:
+        return bool(x == y)
+    except Exception:  # arrays and the like: compare what they print
+        return repr(x) == repr(y)
+
+
+def _plain_callbacks(config: AlgorithmConfig) -> list[type]:
+    cbs = config.callbacks_class
+    cbs = list(cbs) if isinstance(cbs, list | tuple) else [cbs]
+    return [c for c in cbs if c not in (*METRICS_CALLBACKS, RLlibCallback, None)]
+
+
+def _policy_specs(config: AlgorithmConfig) -> dict[str, tuple]:
+    """Each policy's module class (the config's default where unset), catalog, model config
+    and spaces, without ASOR's modules; the multi-module class of a user's MultiRLModuleSpec."""
+    spec = compat.user_rl_module_spec(config)
+    default = config.get_default_rl_module_spec()
+    pids = list(config.policies) if config.is_multi_agent else [DEFAULT_MODULE_ID]
+    if isinstance(spec, MultiRLModuleSpec):
+        subs = {m: s for m, s in spec.rl_module_specs.items() if not is_aux_module(m)}
+        out: dict[str, tuple] = {"": (spec.multi_rl_module_class,)}
+    else:
+        subs = {pid: spec or RLModuleSpec() for pid in pids}
+        out = {"": (MultiRLModule,)}
+    for mid, sub in subs.items():
+        out[mid] = (
+            sub.module_class or getattr(default, "module_class", None),
+            sub.catalog_class,
+            sub.model_config,
+            sub.observation_space,
+            sub.action_space,
+            sub.inference_only,
+            sub.learner_only,
+        )
+    return out

@@ -1,8 +1,9 @@
 """How `with_asor`, the `Asor<run>` Tune trainables and the metrics callback wire ASOR into an
 RLlib config, checked in this process on configs, module specs and hand-made results (no Ray
-started): the learner class, the stored settings, the fast off-policy path, one discriminator
-(and proxy) per trained policy with that policy's spaces, `policies_to_train` that always trains
-the aux modules, the `"asor"` block of a Tune config dict, and `asor/...` in the results."""
+started): the learner class, the stored settings, the base algorithm's path kept, one
+discriminator (and proxy) per trained policy with that policy's spaces, `policies_to_train` that
+always trains the aux modules, the `"asor"` block of a Tune config dict, and `asor/...` in the
+results."""
 
 from __future__ import annotations
 
@@ -25,7 +26,13 @@ from ray.rllib.policy.policy import PolicySpec
 from rllib_asor.algorithms.escp.config import EscpConfig
 from rllib_asor.algorithms.maple.maple import MapleConfig, MopoConfig
 from rllib_asor.algorithms.ppo.overlap import OverlappedPPO
-from rllib_asor.algorithms.sac.fast import FAST_KEY, FastCQLTorchRLModule, FastSACTorchRLModule
+from rllib_asor.algorithms.sac.config import FastSACConfig
+from rllib_asor.algorithms.sac.fast import (
+    FAST_KEY,
+    FastCQLTorchRLModule,
+    FastSACTorchRLModule,
+    fast_off_policy,
+)
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.registry import envs
 from rllib_asor.rllib import trainable
@@ -43,6 +50,7 @@ from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 from rllib_asor.rllib.trainable import _asor_init, asor_trainable
 from rllib_asor.rllib.wiring import (
     SUPPORTED,
+    AsorFastSACTorchLearner,
     AsorMultiRLModuleSpec,
     _algorithm_name,
     _AlsoTrainAux,
@@ -129,12 +137,13 @@ def test_a_named_env_is_registered_for_the_env_runners():
         (PPOConfig(), AsorPPOTorchLearner),
         (PPOConfig(algo_class=OverlappedPPO), AsorPPOTorchLearner),
         (SACConfig(), AsorSACTorchLearner),
+        (FastSACConfig(), AsorFastSACTorchLearner),
         (CQLConfig(), AsorCQLTorchLearner),
         (MapleConfig(), AsorMapleTorchLearner),
         (MopoConfig(), AsorMapleTorchLearner),
         (EscpConfig(), AsorESCPTorchLearner),
     ],
-    ids=["PPO", "OverlappedPPO", "SAC", "CQL", "MAPLE", "MOPO", "ESCP"],
+    ids=["PPO", "OverlappedPPO", "SAC", "FastSAC", "CQL", "MAPLE", "MOPO", "ESCP"],
 )
 def test_each_algorithm_gets_its_asor_learner(config, learner):
     assert with_asor(config).learner_class is learner
@@ -181,40 +190,39 @@ def test_with_asor_refuses_what_it_cannot_wire(config, message):
     assert message in str(err.value)
 
 
-# ------------------------------------------------------------------ fast off-policy path
+# ------------------------------------------------------------------ the base algorithm's path
 @pytest.mark.parametrize(
-    "config, settings, fast_module",
+    "config, settings",
     [
-        (SACConfig(), {}, FastSACTorchRLModule),
-        (CQLConfig(), {}, FastCQLTorchRLModule),
-        (SACConfig(), {"proxy": "ensemble"}, FastSACTorchRLModule),
-        # srpo trains no proxy, so per-dynamics RND is not in the way
-        (SACConfig(), {"mode": "srpo", "proxy": "rnd_per_dynamics"}, FastSACTorchRLModule),
+        (SACConfig(), {}),
+        (CQLConfig(), {}),
+        (SACConfig(), {"proxy": "ensemble"}),
+        (SACConfig(), {"proxy": "rnd_per_dynamics"}),
+        (SACConfig().learners(learner_config_dict={FAST_KEY: False}), {}),
+        (PPOConfig(), {}),
     ],
-    ids=["SAC", "CQL", "SAC_ensemble", "SAC_srpo_rnd_per_dynamics"],
+    ids=["SAC", "CQL", "SAC_ensemble", "SAC_rnd_per_dynamics", "SAC_opt_out", "PPO"],
 )
-def test_sac_and_cql_get_the_fast_off_policy_path(config, settings, fast_module):
+def test_with_asor_keeps_rllibs_own_module_and_path(config, settings):
+    """ASOR on a stock config stays on RLlib's path: no fast off-policy path, no module swap
+    (tests/rllib/test_with_asor_arms.py compares the two arms in full)."""
     out = with_asor(config, **settings)
+    assert out.learner_config_dict.get(FAST_KEY) is config.learner_config_dict.get(FAST_KEY)
+    assert specs(out)[DEFAULT_MODULE_ID].module_class is None  # the config's default module
+
+
+@pytest.mark.parametrize(
+    "config, fast_module",
+    [
+        (fast_off_policy(SACConfig()), FastSACTorchRLModule),
+        (fast_off_policy(CQLConfig()), FastCQLTorchRLModule),
+    ],
+    ids=["SAC", "CQL"],
+)
+def test_with_asor_keeps_the_fast_path_a_config_is_on(config, fast_module):
+    out = with_asor(config)
     assert out.learner_config_dict[FAST_KEY] is True
     assert specs(out)[DEFAULT_MODULE_ID].module_class is fast_module
-
-
-@pytest.mark.parametrize(
-    "config, settings, fast_key",
-    [
-        (SACConfig().learners(learner_config_dict={FAST_KEY: False}), {}, False),
-        (CQLConfig().learners(learner_config_dict={FAST_KEY: False}), {}, False),
-        # the flat replay buffer keeps no infos: per-dynamics RND needs their dynamics ids
-        (SACConfig(), {"proxy": "rnd_per_dynamics"}, None),
-        (SACConfig(), {"mode": "count", "proxy": "rnd_per_dynamics"}, None),
-        (PPOConfig(), {}, None),
-    ],
-    ids=["SAC_opt_out", "CQL_opt_out", "SAC_rnd_per_dynamics", "SAC_count_per_dynamics", "PPO"],
-)
-def test_no_fast_path_when_opted_out_for_per_dynamics_rnd_or_on_policy(config, settings, fast_key):
-    out = with_asor(config, **settings)
-    assert out.learner_config_dict.get(FAST_KEY) is fast_key
-    assert specs(out)[DEFAULT_MODULE_ID].module_class is None
 
 
 # ------------------------------------------------------------------ policies_to_train

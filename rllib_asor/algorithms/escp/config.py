@@ -1,4 +1,4 @@
-"""`EscpConfig`: ESCP as an RLlib algorithm (a `SACConfig` with ESCP's settings and defaults).
+"""`EscpConfig`: ESCP as an RLlib algorithm (a `FastSACConfig` with ESCP's settings and defaults).
 
     from rllib_asor import EscpConfig, with_asor
     config = (
@@ -18,9 +18,11 @@ LeakyReLU (`up_hidden_size`, `value_hidden_size`), one gradient step per env ste
 the initial policy).
 
 Needs an env reporting `info["dynamics_id"]` (the training task), Box actions and flat Box
-observations; single-agent, n_step 1, uniform replay. The `ESCP` algorithm puts the config on
-the fast off-policy path when it is built (`escp_fast_path`): its replay buffer, the
-window connector, and `FRAGMENT` env steps / `STEPS_PER_CALL` gradient steps per call.
+observations; single-agent, n_step 1, uniform replay. ESCP builds on the fast off-policy path
+(`FastSACConfig`, for both arms of an ESCP vs ESCP+ASOR comparison): the `ESCP` algorithm
+applies `escp_fast_path` when it is built (`on_fast_path()` shows the result): its replay
+buffer, the window connector, and `FRAGMENT` env steps / `STEPS_PER_CALL` gradient steps per
+call.
 """
 
 from __future__ import annotations
@@ -37,12 +39,14 @@ from rllib_asor.algorithms.escp.learner import EscpLearnerMixin, EscpTorchLearne
 from rllib_asor.algorithms.escp.module import ESCP_KEY, EscpTorchRLModule
 from rllib_asor.algorithms.escp.replay import EscpReplayBuffer
 from rllib_asor.algorithms.escp.settings import EscpSettings
+from rllib_asor.algorithms.sac.config import FastSACConfig
 from rllib_asor.algorithms.sac.fast import FAST_KEY, FRAGMENT, STEPS_PER_CALL
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
 
 
-class EscpConfig(SACConfig):
-    """RLlib's `SACConfig` plus ESCP's settings (`.escp(...)`, `EscpSettings`)."""
+class EscpConfig(FastSACConfig):
+    """`FastSACConfig` (RLlib's `SACConfig` on the fast path) plus ESCP's settings
+    (`.escp(...)`, `EscpSettings`)."""
 
     def __init__(self, algo_class: type | None = None) -> None:
         super().__init__(algo_class=algo_class or ESCP)
@@ -78,6 +82,10 @@ class EscpConfig(SACConfig):
 
     def get_default_learner_class(self) -> type:
         return EscpTorchLearner
+
+    def on_fast_path(self) -> SACConfig:
+        """A copy with what the `ESCP` algorithm applies when built (`escp_fast_path`)."""
+        return escp_fast_path(self)
 
     def validate(self) -> None:
         super().validate()
