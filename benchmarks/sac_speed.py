@@ -16,8 +16,8 @@ Runners (`--runners`):
 - `rllib`: the same config through `rllib_asor.fast_off_policy(config)` (the fast path the SAC
   tuned examples and `with_asor` use; rllib_asor/algorithms/sac/fast.py).
 - `asor_stock`: ASOR on RLlib's stock path (`learner_config_dict["fast_off_policy"] = False`).
-- `asor`: `rllib_asor.with_asor(config)` (the robust default; fast path by default: the
-  discriminator and RND take one minibatch per Learner call of 16 SAC steps).
+- `asor`: `rllib_asor.with_asor(fast_off_policy(config))` (the robust default on the fast path:
+  the discriminator and RND take one minibatch per Learner call of 16 SAC steps).
 - `asor_every_step`: the same with `aux_epochs=1`: discriminator and RND trained with every SAC
   gradient step (an earlier default of the fast path).
 
@@ -62,7 +62,7 @@ LABELS = {
     "rllib_stock": "RLlib 2.60 `SACConfig` as a user writes it (stock path)",
     "rllib": "RLlib SAC, rllib_asor fast path (`fast_off_policy`, tuned examples)",
     "asor_stock": "SAC + ASOR on the stock path",
-    "asor": "SAC + ASOR, `with_asor(SACConfig...)` (fast path by default)",
+    "asor": "SAC + ASOR on the fast path, `with_asor(fast_off_policy(SACConfig...))`",
     "asor_every_step": "SAC + ASOR, fast path, aux nets trained every SAC step (`aux_epochs=1`)",
 }
 
@@ -149,9 +149,9 @@ class RllibRunner:
         if name == "rllib":
             config = fast_off_policy(config)
         elif name == "asor":
-            config = rllib_asor.with_asor(config, seed=args.seed)
+            config = rllib_asor.with_asor(fast_off_policy(config), seed=args.seed)
         elif name == "asor_every_step":
-            config = rllib_asor.with_asor(config, seed=args.seed, aux_epochs=1)
+            config = rllib_asor.with_asor(fast_off_policy(config), seed=args.seed, aux_epochs=1)
         elif name == "asor_stock":
             config = rllib_asor.with_asor(fast_off_policy(config, enabled=False), seed=args.seed)
         self.algo = config.build_algo()
