@@ -79,15 +79,14 @@ def parse_method(
 
 
 def sac_config(task: str, seed: int, asor: dict[str, Any] | None, args: argparse.Namespace) -> Any:
-    """The shared SAC config (identical for every method), plus ASOR when given."""
-    from ray.rllib.algorithms.sac import SACConfig
-
+    """The shared SAC config (identical for every method: the fast off-policy path,
+    `FastSACConfig`), plus ASOR when given."""
     import rllib_asor
     from rllib_asor.data.collect import MUJOCO_SAC_MODEL, MUJOCO_SAC_TRAINING
 
     # Native ratio with one local env: 256 replayed rows per sampled step; utd·256 per step.
     config = (
-        SACConfig()
+        rllib_asor.FastSACConfig()
         .environment(
             f"rllib_asor/{task}Shift-v0", env_config={"params": ["mass", "damping", "wind"]}
         )

@@ -40,6 +40,7 @@ def cql_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
 
     import rllib_asor
     from rllib_asor.algorithms.cql.offline import offline_input
+    from rllib_asor.algorithms.sac.fast import fast_off_policy
 
     config = (
         CQLConfig()
@@ -64,6 +65,7 @@ def cql_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace)
     offline_input(
         config, args.data, quality=args.quality, dataset_num_iters_per_learner=args.iter_updates
     )
+    config = fast_off_policy(config)  # the concat-MLP critics, for every method
     if asor is not None:
         config = rllib_asor.with_asor(config, **({"seed": seed} | asor))
     return config
