@@ -59,7 +59,8 @@ class ExperimentSpec(BaseModel):
     num_env_steps_sampled_lifetime, env_runners/episode_return_mean, time_total_s, ...)."""
     config: dict[str, Any] = {}
     """The AlgorithmConfig settings by name (old names are translated with a warning), any
-    value may be `{grid_search: [...]}`; our own blocks: `asor:`, `escp:`, `maple:`, `dara:`, `osi:`."""
+    value may be `{grid_search: [...]}`; our own blocks: `asor:`, `escp:`, `maple:`, `dara:`, `osi:`,
+    `cadm:`."""
     checkpoint_config: CheckpointSettings = CheckpointSettings()
     """When checkpoints are saved and how many are kept."""
     num_samples: Annotated[int, Field(ge=1), Allowed("an integer >= 1")] = 1
@@ -104,6 +105,9 @@ SETTINGS_BLOCKS: dict[str, SettingsBlock] = {
     ),
     "osi": SettingsBlock(
         "rllib_asor.algorithms.osi.settings:OsiSettings", ("OSI",), "osi_settings"
+    ),
+    "cadm": SettingsBlock(
+        "rllib_asor.algorithms.cadm.settings:CadmSettings", ("CaDM",), "cadm_settings"
     ),
 }
 """Our `config:` blocks by name; validate.py checks each, `rllib schema` describes each."""

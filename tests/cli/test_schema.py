@@ -93,6 +93,7 @@ BAD = [  # the bad inputs of tests/cli/test_errors.py, tests/algorithms/*/test_*
     HEAD + "  config:\n    dara: {eta: 0.1}\n",
     ESCP.replace("ESCP", "OSI") + "  config:\n    osi: {history_len: 0}\n",
     ESCP + "  config:\n    osi: {history_len: 8}\n",
+    ESCP + "  config:\n    cadm: {back_coeff: -1}\n",
 ]
 
 
@@ -131,7 +132,7 @@ def test_the_asor_block_schema_takes_and_refuses_what_asor_config_does(key, good
         assert not block.is_valid({key: value}), value
 
 
-@pytest.mark.parametrize("name", ["asor", "escp", "maple", "dara", "osi"])
+@pytest.mark.parametrize("name", ["asor", "escp", "maple", "dara", "osi", "cadm"])
 def test_each_block_schema_is_strict_and_names_every_setting(name):
     from rllib_asor.cli.spec import SETTINGS_BLOCKS
 
