@@ -16,6 +16,7 @@ ALGORITHMS = {
     "ESCP": "rllib_asor.algorithms.escp.config:ESCP",
     "OSI": "rllib_asor.algorithms.osi.config:OSI",  # universal policy + system identification
     "CaDM": "rllib_asor.algorithms.cadm.config:CaDM",  # context-aware dynamics model (model-free)
+    "FastSAC": "rllib_asor.algorithms.sac.config:FastSAC",  # SAC on the fast off-policy path
 }
 """Run name → "module:Class"."""
 
