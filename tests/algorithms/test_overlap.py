@@ -23,8 +23,8 @@ def _cartpole(runners: int = 1) -> PPOConfig:
     )
 
 
-def _in_flight_during_updates(algo) -> list[int]:
-    """Run 3 iterations; per Learner update, the overlap's sample calls then in flight."""
+def _spy_in_flight(algo) -> list[int]:
+    """From now on, per Learner update: the overlap's sample calls then in flight."""
     seen: list[int] = []
     update = algo.learner_group.update
 
@@ -33,25 +33,17 @@ def _in_flight_during_updates(algo) -> list[int]:
         return update(*args, **kwargs)
 
     algo.learner_group.update = spy
-    for _ in range(3):
-        result = algo.train()
-    assert result["num_env_steps_sampled_lifetime"] >= 3 * 400
     return seen
-
-
-def test_runners_sample_the_next_batch_during_the_update(ray_session):
-    algo = overlap_sampling(_cartpole()).build_algo()
-    try:
-        assert isinstance(algo, OverlappedPPO)
-        assert _in_flight_during_updates(algo) == [1, 1, 1]
-    finally:
-        algo.stop()
 
 
 def test_switched_off_it_is_plain_ppo(ray_session):
     algo = overlap_sampling(_cartpole(), enabled=False).build_algo()
     try:
-        assert _in_flight_during_updates(algo) == [0, 0, 0]
+        seen = _spy_in_flight(algo)
+        for _ in range(3):
+            result = algo.train()
+        assert result["num_env_steps_sampled_lifetime"] >= 3 * 400
+        assert seen == [0, 0, 0]
     finally:
         algo.stop()
 
@@ -66,11 +58,16 @@ def test_without_remote_runners_it_samples_in_the_driver(ray_session):
         algo.stop()
 
 
-def test_learns_cartpole_and_restores_from_a_checkpoint(ray_session, tmp_path):
+def test_samples_the_next_batch_during_the_update_learns_and_restores(ray_session, tmp_path):
+    """The runners sample batch k+1 while the Learner trains on batch k (one sample call in
+    flight at every update), the policy learns CartPole, and a checkpoint restores."""
     config = _cartpole().training(train_batch_size=1000, minibatch_size=250, num_epochs=6, lr=1e-3)
     algo = overlap_sampling(config).build_algo()
     try:
+        assert isinstance(algo, OverlappedPPO)
+        seen = _spy_in_flight(algo)
         returns = [algo.train()["env_runners"]["episode_return_mean"] for _ in range(10)]
+        assert seen == [1] * 10
         assert np.nanmax(returns[-3:]) > 3 * returns[0]  # random policy ≈ 20
         path = algo.save(str(tmp_path / "ckpt")).checkpoint.path
     finally:

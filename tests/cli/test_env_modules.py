@@ -92,13 +92,19 @@ def _not_imported(root: Path) -> None:
     assert not (root / "IMPORTED").exists(), "a file the user did not name was imported"
 
 
-@pytest.mark.parametrize("env_name", ["myenvs:MyPointReach-v0", "myenvs:PointReach",
-                                      "myenvs.PointReach"])  # fmt: skip
-def test_every_form_naming_the_module_resolves_from_its_folder(folder, env_name):
+def test_every_form_naming_the_module_resolves_from_its_folder(folder):
+    """One file, one experiment per form (one `rllib` start instead of three)."""
     root, env = folder
-    proc = _rllib(["train", "file", _yaml(root, env_name), "--dry-run"], env, root)
+    names = ["myenvs:MyPointReach-v0", "myenvs:PointReach", "myenvs.PointReach"]
+    path = root / "forms.yaml"
+    path.write_text("".join(
+        f"form{i}:\n  env: {name}\n  run: PPO\n  stop: {{training_iteration: 1}}\n"
+        for i, name in enumerate(names)
+    ))  # fmt: skip
+    proc = _rllib(["train", "file", str(path), "--dry-run"], env, root)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert f"env: {env_name}" in proc.stdout
+    for i, name in enumerate(names):
+        assert f"form{i}:\n  env: {name}\n" in proc.stdout, proc.stdout
     _not_imported(root)
 
 

@@ -69,14 +69,19 @@ def _rllib(args: list[str], user_env: dict, cwd: Path, timeout: int = 300):
                           env=user_env, cwd=cwd)
 
 
-@pytest.mark.parametrize(
-    "env_name", ["myenv:MyVarPole-v0", "myenv.VarPoleCartPole", "myenv:VarPoleCartPole"]
-)
-def test_every_way_of_naming_the_env_validates(user, env_name):
+def test_every_way_of_naming_the_env_validates(user):
+    """One file, one experiment per form (one `rllib` start instead of three)."""
     root, env = user
-    proc = _rllib(["train", "file", str(_yaml(root, env_name)), "--dry-run"], env, root / "work")
+    names = ["myenv:MyVarPole-v0", "myenv.VarPoleCartPole", "myenv:VarPoleCartPole"]
+    path = root / "work" / "forms.yaml"
+    path.write_text("".join(
+        f"form{i}:\n    env: {name}\n    run: PPO\n    config: {{asor: {{seed: 0}}}}\n"
+        for i, name in enumerate(names)
+    ))  # fmt: skip
+    proc = _rllib(["train", "file", str(path), "--dry-run"], env, root / "work")
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert f"env: {env_name}" in proc.stdout
+    for i, name in enumerate(names):
+        assert f"form{i}:\n  env: {name}\n" in proc.stdout, proc.stdout
 
 
 def test_own_env_by_module_and_id_trains_with_test_and_is_evaluated(user):
