@@ -160,3 +160,31 @@ def test_what_the_schema_refuses_the_cli_refuses_in_one_line_naming_the_key(text
             check_file(exp)
     line = str(refused.value)
     assert "\n" not in line and f"{path}: x." in line, line
+
+
+@pytest.mark.parametrize(
+    ("run", "env", "block", "attr"),
+    [
+        ("ESCP", "rllib_asor/HalfCheetahShift-v0", "escp: {history_len: 8}", "escp_settings"),
+        ("MAPLE", "rllib_asor/HopperShift-v0", "maple: {horizon: 3}", "maple_settings"),
+        ("MAPLE", "rllib_asor/HopperShift-v0", "dara: {eta: 0.2}", "dara_settings"),
+        ("OSI", "rllib_asor/HalfCheetahShift-v0", "osi: {history_len: 8}", "osi_settings"),
+        ("CaDM", "rllib_asor/HalfCheetahShift-v0", "cadm: {history_len: 8}", "cadm_settings"),
+    ],
+)
+def test_each_block_reaches_its_config_attribute(run, env, block, attr, tmp_path):
+    from rllib_asor.cli.build import build_algo_config
+    from rllib_asor.cli.spec import load_file
+    from rllib_asor.cli.validate import check_file
+
+    text = f"x:\n  env: {env}\n  run: {run}\n  config:\n    {block}\n"
+    if run == "MAPLE":
+        text += "    input: [data/offline/hopper/original/medium]\n"
+    path = tmp_path / "ok.yaml"
+    path.write_text(text)
+    assert _errors(jsonschema.Draft202012Validator(schema.experiment_schema()), text) == []
+    exp = load_file(str(path))[0]
+    check_file(exp)
+    (settings,) = yaml.safe_load(block).values()
+    ((key, value),) = settings.items()
+    assert getattr(build_algo_config(exp), attr)[key] == value
