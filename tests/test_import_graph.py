@@ -123,10 +123,11 @@ LAYERS = [
     ("rllib_asor.cli",),
     ("rllib_asor.report",),
     ("rllib_asor.rllib", "rllib_asor.registry"),  # ASOR glue, env ids for Tune
-    ("rllib_asor.algorithms", "rllib_asor.race", "rllib_asor.models", "rllib_asor.data"),
+    ("rllib_asor.algorithms", "rllib_asor.race", "rllib_asor.data"),
     ("rllib_asor.evaluation",),
     ("rllib_asor.asor", "rllib_asor.envs", "game_env"),
-    ("rllib_asor.ray_compat",),  # the one wall around Ray's private names: imports nothing of ours
+    # the one wall around Ray's private names; the pydantic base of every settings block
+    ("rllib_asor.ray_compat", "rllib_asor.settings_model"),
 ]
 
 

@@ -14,8 +14,8 @@ from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from rllib_asor.asor import settings_model
-from rllib_asor.asor.settings_model import Allowed, Settings, one_of
+from rllib_asor import settings_model
+from rllib_asor.settings_model import Allowed, Settings, one_of
 
 MODES = ("asor", "srpo", "count", "random")
 PROXIES = ("rnd", "ensemble", "rnd_per_dynamics")

@@ -16,9 +16,9 @@ from typing import Annotated, Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from rllib_asor.asor.settings_model import Allowed, allowed_text, one_of
 from rllib_asor.cli import grid, legacy
 from rllib_asor.cli.errors import UsageError
+from rllib_asor.settings_model import Allowed, allowed_text, one_of
 
 DEFAULT_NUM_TO_KEEP = 3
 

@@ -14,7 +14,7 @@ from typing import Annotated, Any, ClassVar
 from pydantic import Field
 
 from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
-from rllib_asor.asor.settings_model import Allowed, Settings
+from rllib_asor.settings_model import Allowed, Settings
 
 Widths = Annotated[
     tuple[Annotated[int, Field(ge=1)], ...],

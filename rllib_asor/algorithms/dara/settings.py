@@ -14,7 +14,7 @@ from typing import Annotated, Any, ClassVar
 from pydantic import Field
 
 from rllib_asor.algorithms.maple.settings import AtLeast1, NonNegative, Positive
-from rllib_asor.asor.settings_model import Allowed, Settings
+from rllib_asor.settings_model import Allowed, Settings
 
 
 class DaraSettings(Settings):

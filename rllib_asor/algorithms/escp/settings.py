@@ -12,7 +12,7 @@ from typing import Annotated, Any, ClassVar
 from pydantic import Field, model_validator
 
 from rllib_asor.algorithms.escp.rmdm import KERNELS
-from rllib_asor.asor.settings_model import Allowed, Settings, one_of
+from rllib_asor.settings_model import Allowed, Settings, one_of
 
 IntAtLeast0 = Annotated[int, Field(ge=0), Allowed("an int ≥ 0")]
 IntAtLeast1 = Annotated[int, Field(ge=1), Allowed("an int ≥ 1")]

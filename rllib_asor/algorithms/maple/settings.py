@@ -17,7 +17,7 @@ from typing import Annotated, Any, ClassVar
 
 from pydantic import ConfigDict, Field, model_validator
 
-from rllib_asor.asor.settings_model import Allowed, Settings
+from rllib_asor.settings_model import Allowed, Settings
 
 Flag = Annotated[bool, Allowed("true or false")]
 AtLeast1 = Annotated[int, Field(ge=1), Allowed("an integer >= 1")]
