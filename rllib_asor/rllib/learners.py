@@ -92,7 +92,8 @@ logger = logging.getLogger(__name__)
 
 
 class AsorLearnerMixin(SameMathSpeedMixin):
-    """Adds the ASOR piece to a Learner's pipeline; mix in before the algorithm's Learner."""
+    """Builds the ASOR piece with the algorithm's adapter and puts it in the Learner's pipeline,
+    or applies it to batches that bypass the pipeline; mix in before the algorithm's Learner."""
 
     asor_adapter: AsorAdapter = PPOAsorAdapter()
     """The algorithm's answers to the piece (which value, which rows, where the reward goes)."""
