@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.cli.helpers import rllib_commands
+
 RLLIB = str(Path(sys.executable).with_name("rllib"))
 
 MYENVS = '''
@@ -108,41 +110,58 @@ def test_every_form_naming_the_module_resolves_from_its_folder(folder):
     _not_imported(root)
 
 
-def test_a_bare_id_imports_nothing_and_says_how_to_name_the_module(folder):
+def test_a_bare_id_imports_nothing_and_ab_imports_the_module_from_its_folder(folder):
+    """A bare id imports nothing and says how to name the module; `rllib ab` reaches the env
+    build (the module imported from the current folder) with an env_config the env refuses.
+    One interpreter: the two bare ids first, as they import nothing."""
     root, env = folder
-    proc = _rllib(["train", "file", _yaml(root, "MyPointReach-v0"), "--dry-run"], env, root)
-    _one_line(proc, "unknown env id 'MyPointReach-v0'", "did you mean 'myenvs:MyPointReach-v0'",
+    bad_config = _yaml(root, "myenvs:MyPointReach-v0", ", env_config: {mass: 3}, asor: {seed: 0}")
+    bare, close, here = rllib_commands(
+        [
+            ["train", "file", _yaml(root, "MyPointReach-v0"), "--dry-run"],
+            ["train", "file", _yaml(root, "MyPointReach-v1"), "--dry-run"],
+            ["ab", bad_config, "--seeds", "2", "--test"],
+        ],
+        env,
+        root,
+    )
+    _one_line(bare, "unknown env id 'MyPointReach-v0'", "did you mean 'myenvs:MyPointReach-v0'",
               "'mymodule:MyPointReach-v0'".replace("mymodule", "myenvs"),
               "current folder and on PYTHONPATH")  # fmt: skip
-    _not_imported(root)
-    close = _rllib(["train", "file", _yaml(root, "MyPointReach-v1"), "--dry-run"], env, root)
     _one_line(close, "unknown env id 'MyPointReach-v1'", "'mymodule:MyPointReach-v1'")
-    _not_imported(root)
-
-
-def test_ab_resolves_the_module_from_its_folder_only(folder):
-    """`rllib ab` reaches the env build (the module imported from the current folder) with an
-    env_config the env refuses; from another folder it says where it looked."""
-    root, env = folder
-    path = _yaml(root, "myenvs:MyPointReach-v0", ", env_config: {mass: 3}, asor: {seed: 0}")
-    here = _rllib(["ab", path, "--seeds", "2", "--test"], env, root)
     _one_line(here, "cannot be built with {'mass': 3}")
-    plain = _yaml(root, "myenvs:MyPointReach-v0", ", asor: {seed: 0}")
-    there = _rllib(["ab", plain, "--seeds", "2", "--test"], env, root / "elsewhere")
-    _one_line(there, "module 'myenvs' cannot be imported", "run from the module's folder")
     _not_imported(root)
 
 
-def test_train_and_evaluate_from_the_modules_folder(folder):
+@pytest.fixture(scope="module")
+def trained(folder) -> Path:
+    """`rllib train file --test` on the module's env, run from the module's folder."""
     root, env = folder
     results = root / "results"
     proc = _rllib(["train", "file", _yaml(root, "myenvs:MyPointReach-v0"), "--test",
                    "--storage-path", str(results)], env, root)  # fmt: skip
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     assert "1 trial(s), 0 errored" in proc.stdout
-    ev = _rllib(["evaluate", str(results / "point"), "--episodes", "2"], env, root)
+    return results / "point"
+
+
+def test_train_and_evaluate_from_the_modules_folder(folder, trained):
+    root, env = folder
+    ev = _rllib(["evaluate", str(trained), "--episodes", "2"], env, root)
     assert ev.returncode == 0, (ev.stdout + ev.stderr)[-3000:]
     assert "Traceback" not in ev.stderr and "episodes: 2" in ev.stdout
-    away = _rllib(["evaluate", str(results / "point"), "--episodes", "2"], env, root / "elsewhere")
+    _not_imported(root)
+
+
+def test_from_another_folder_ab_and_evaluate_say_where_they_looked(folder, trained):
+    """Both in one interpreter started in another folder: neither can import the module."""
+    root, env = folder
+    plain = _yaml(root, "myenvs:MyPointReach-v0", ", asor: {seed: 0}")
+    there, away = rllib_commands(
+        [["ab", plain, "--seeds", "2", "--test"], ["evaluate", str(trained), "--episodes", "2"]],
+        env,
+        root / "elsewhere",
+    )
+    _one_line(there, "module 'myenvs' cannot be imported", "run from the module's folder")
     _one_line(away, "module 'myenvs' cannot be imported", "run from the module's folder")
     _not_imported(root)

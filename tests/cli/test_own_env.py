@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.cli.helpers import rllib_commands
+
 RLLIB = str(Path(sys.executable).with_name("rllib"))
 
 MODULE = '''
@@ -132,19 +134,21 @@ def test_python_script_registers_its_env_and_trains_with_asor(user):
     assert "TRAINED" in proc.stdout
 
 
-@pytest.mark.parametrize(
-    ("env_name", "fragments"),
-    [
-        ("CartPole-v9", ("unknown env id 'CartPole-v9'", "close ids: CartPole-v")),
-        ("MyVarPole-v0", ("unknown env id 'MyVarPole-v0'", "did you mean 'myenv:MyVarPole-v0'")),
-        ("nosuchmodule.Env", ("module 'nosuchmodule' cannot be imported", "PYTHONPATH")),
-        ("myenv:NoSuchThing", ("module 'myenv' has no env class",)),
-    ],
-)
-def test_an_env_that_cannot_run_is_refused_in_one_line(user, env_name, fragments):
+# The only one that imports the user's module comes last (all run in one interpreter).
+REFUSED = [
+    ("CartPole-v9", ("unknown env id 'CartPole-v9'", "close ids: CartPole-v")),
+    ("MyVarPole-v0", ("unknown env id 'MyVarPole-v0'", "did you mean 'myenv:MyVarPole-v0'")),
+    ("nosuchmodule.Env", ("module 'nosuchmodule' cannot be imported", "PYTHONPATH")),
+    ("myenv:NoSuchThing", ("module 'myenv' has no env class",)),
+]
+
+
+def test_an_env_that_cannot_run_is_refused_in_one_line(user):
     root, env = user
-    proc = _rllib(["train", "file", str(_yaml(root, env_name)), "--dry-run"], env, root / "work")
-    assert proc.returncode == 2, proc.stderr[-2000:]
-    lines = [line for line in proc.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
-    assert all(f in lines[0] for f in fragments), lines[0]
+    commands = [["train", "file", str(_yaml(root, name)), "--dry-run"] for name, _ in REFUSED]
+    procs = rllib_commands(commands, env, root / "work")
+    for (name, fragments), proc in zip(REFUSED, procs, strict=True):
+        assert proc.returncode == 2, (name, proc.stderr[-2000:])
+        lines = [line for line in proc.stderr.splitlines() if line.strip()]
+        assert len(lines) == 1 and "Traceback" not in proc.stderr, (name, proc.stderr)
+        assert all(f in lines[0] for f in fragments), lines[0]
