@@ -13,6 +13,7 @@ import yaml
 
 from rllib_asor.cli import experiment, retired
 from rllib_asor.cli.errors import UsageError
+from tests.cli.test_e2e import run_cli
 
 OLD = Path(__file__).parent / "old_files"
 RLLIB = str(Path(sys.executable).with_name("rllib"))
@@ -128,12 +129,10 @@ def test_dry_run_prints_the_new_stack_yaml_without_ray(tmp_path):
     assert spec["env"] == "Pendulum-v1" and spec["config"]["actor_lr"] == 0.0004
     saved = tmp_path / "new.yaml"  # the printed file runs without a single translation
     saved.write_text(proc.stdout)
-    again = subprocess.run(
-        [RLLIB, "train", "file", str(saved), "--dry-run"], capture_output=True, text=True,
-        timeout=120,
-    )
-    assert again.returncode == 0, again.stderr[-2000:]
-    assert "translated" not in again.stderr and "dropped" not in again.stderr
+    again = run_cli(["train", "file", str(saved), "--dry-run"])  # in this process: RLlib loaded
+    assert again.rc == 0, again.err[-2000:]
+    assert "translated" not in again.err and "dropped" not in again.err
+    assert yaml.safe_load(again.out)["pendulum-sac-old"] == spec
 
 
 @pytest.mark.slow  # ~1-5 min; the dry-run tests above build the same env runner
