@@ -203,11 +203,9 @@ class FastSACTorchRLModule(TrainModeOnceMixin, DefaultSACTorchRLModule):
         with torch.no_grad():
             logits_next = self.pi(self.pi_encoder({Columns.OBS: next_obs})[ENCODER_OUT])
         taken = {Columns.OBS: obs, Columns.ACTIONS: batch[Columns.ACTIONS]}
-        out[QF_PREDS] = self._qf_forward_train_helper(taken, self.qf_encoder, self.qf)
+        out[QF_PREDS] = self.qf(self.qf_encoder(taken)[ENCODER_OUT]).squeeze(-1)
         if self.twin_q:
-            out[QF_TWIN_PREDS] = self._qf_forward_train_helper(
-                taken, self.qf_twin_encoder, self.qf_twin
-            )
+            out[QF_TWIN_PREDS] = self.qf_twin(self.qf_twin_encoder(taken)[ENCODER_OUT]).squeeze(-1)
         out[Columns.ACTION_DIST_INPUTS] = logits
         out[ACTION_DIST_INPUTS_NEXT] = logits_next
         dist_cls = self.get_train_action_dist_cls()
