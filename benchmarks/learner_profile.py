@@ -7,8 +7,8 @@ profiles `--updates` updates three ways, each normalised per minibatch:
 - `timing`: wall and CPU time split into the Learner connector (per update: episodes → train
   batch, GAE, ASOR's piece), RLlib's `_update` per minibatch (forward, loss, backward,
   optimizer) and the rest of `learner.update` per minibatch (minibatch iterator, metrics).
-- `cprofile`: Python functions by own time (tottime) and by inclusive time (cumtime), in ms
-  per minibatch; the per-update Learner connector (episodes → batch, GAE, ASOR's piece) shows
+- `cprofile`: Python functions by own CPU time (tottime) and by inclusive CPU time (cumtime),
+  in ms per minibatch; the per-update Learner connector (episodes → batch, GAE, ASOR's piece) shows
   as `_make_batch_if_necessary` and is spread over the update's minibatches.
 - `torch`: `torch.profiler` (with `--device cuda` also the GPU's own kernel time per minibatch:
   far below the wall time means the GPU waits on the host, i.e. per-call overhead).
@@ -242,7 +242,9 @@ def profile_torch(run: Run, minibatches: int, top: int) -> str:
 
 
 def profile_python(run: Run, minibatches: int, top: int) -> str:
-    prof = cProfile.Profile()
+    # CPU time of this process, not the wall clock: other jobs on a shared machine then add
+    # little (on a GPU, time spent waiting in a sync still counts: CUDA spins).
+    prof = cProfile.Profile(time.process_time)
     t0, c0 = time.perf_counter(), time.process_time()
     prof.enable()
     for b in range(1, 1 + run.args.updates):
