@@ -59,6 +59,14 @@ def _module(algo):
     return algo.learner_group._learner.module["default_policy"].unwrapped()
 
 
+def _osi_error(module, batch) -> float:
+    """OSI's squared error of the true parameters on `batch` (its windows)."""
+    from rllib_asor.algorithms.escp.replay import WINDOW
+
+    with torch.no_grad():
+        return osi_loss(module.context(batch[WINDOW]), batch[PARAMS].float()).item()
+
+
 def test_osi_loss_is_the_mean_squared_error_of_the_estimate():
     assert osi_loss(torch.tensor([[1.0, 2.0]]), torch.zeros(1, 2)).item() == pytest.approx(2.5)
     assert osi_loss(torch.tensor([[0.3, -0.2]]), torch.tensor([[0.3, -0.2]])).item() == 0.0
@@ -117,15 +125,16 @@ def test_osi_trains_on_a_users_env_policy_on_true_parameters_osi_by_regression(r
         module = _module(algo)
         assert isinstance(module.encoder, OsiNetwork)
         before = {k: v.clone() for k, v in module.state_dict().items()}
+        batch = algo.local_replay_buffer.sample(256)[0].columns
+        batch = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in batch.items()}
+        first = _osi_error(module, batch)
         losses = [algo.train()["learners"]["default_policy"]["osi_loss"] for _ in range(6)]
         after = module.state_dict()
         for prefix in ("encoder.", "pi.", "qf."):
             assert any(not torch.equal(before[k], after[k]) for k in after if k.startswith(prefix))
         assert all(math.isfinite(x) for x in losses)
-        assert losses[-1] < losses[0]  # OSI learns to identify the gain
+        assert _osi_error(module, batch) < 0.75 * first  # OSI learns to identify the gain
         # the universal policy reads the true parameters: no RL gradient reaches OSI
-        batch = algo.local_replay_buffer.sample(32)[0].columns
-        batch = {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in batch.items()}
         assert set(np.round(batch[PARAMS].numpy().ravel(), 3)) <= {-0.5, 0.25, 1.0}
         fwd = module.forward_train(batch)
         module.zero_grad(set_to_none=True)
