@@ -92,10 +92,12 @@ def test_race_net_acting_without_autograd_keeps_attentions_fused_path_and_the_sa
     torch.testing.assert_close(act_logits, train_logits.detach(), rtol=1e-5, atol=1e-5)
 
 
-def learner(cls: type):
+def learner(cls: type, grad_clip: float | None = None):
     """The race PPO Learner (seeded, so every build starts from the same weights) as `cls`."""
     config = race_ppo_config(max_episode_steps=20).learners(learner_class=cls)
-    config = config.training(minibatch_size=32, num_epochs=2, train_batch_size=64)
+    config = config.training(
+        minibatch_size=32, num_epochs=2, train_batch_size=64, grad_clip=grad_clip
+    )
     return config.debugging(seed=3).build_learner(spaces=SPACES)
 
 
@@ -153,10 +155,12 @@ def test_sync_free_ppo_loss_equals_rllibs_loss_metrics_and_gradients(use_kl_loss
         torch.testing.assert_close(ga[name], gb[name], rtol=1e-4, atol=1e-6, msg=name)
 
 
-def test_one_update_of_the_race_ppo_learner_equals_rllibs_ppo_learner():
+@pytest.mark.parametrize("grad_clip", [None, 0.05])
+def test_one_update_of_the_race_ppo_learner_equals_rllibs_ppo_learner(grad_clip):
     """Same recorded episodes, same seeds: after one update (2 epochs × 2 minibatches, no
     shuffle) the race Learner (lean net path, sync-free loss, one gradient check, fused Adam)
-    holds the weights RLlib's own PPOTorchLearner arrives at, and reports the same losses."""
+    holds the weights RLlib's own PPOTorchLearner arrives at, and reports the same losses; with
+    a `grad_clip` that binds, too (RLlib's gradient postprocessing then runs)."""
     runner = SingleAgentEnvRunner(
         config=race_ppo_config(max_episode_steps=20)
         .env_runners(num_envs_per_env_runner=2)
@@ -166,7 +170,7 @@ def test_one_update_of_the_race_ppo_learner_equals_rllibs_ppo_learner():
     runner.stop()
     results, weights = {}, {}
     for cls in (PPOTorchLearner, LeanPPOTorchLearner):
-        lrn = learner(cls)
+        lrn = learner(cls, grad_clip)
         assert type(lrn) is cls
         res = lrn.update(
             episodes=copy.deepcopy(episodes),
@@ -180,6 +184,11 @@ def test_one_update_of_the_race_ppo_learner_equals_rllibs_ppo_learner():
             for k, v in res[DEFAULT_MODULE_ID].items()
             if k in ("policy_loss", "vf_loss", "entropy", "mean_kl_loss", "total_loss")
         }
+        if grad_clip is not None:  # the clip binds: RLlib logs the norm it clipped from
+            assert (
+                float(res[DEFAULT_MODULE_ID]["gradients_default_optimizer_global_norm"].peek())
+                > grad_clip
+            )
         weights[cls] = {
             n: p.detach().clone() for n, p in lrn.module[DEFAULT_MODULE_ID].named_parameters()
         }
