@@ -40,6 +40,7 @@ def test_the_site_builds_strict_with_every_public_name_documented(tmp_path: Path
     for name in AsorConfig.model_fields:  # every setting with its own entry
         assert f'id="rllib_asor.asor.config.AsorConfig.{name}"' in pages["asor_config"]
     assert 'id="rllib_asor.algorithms.escp.config.EscpConfig"' in pages["escp"]
+    assert 'id="rllib_asor.algorithms.sac.config.FastSACConfig"' in pages["with_asor"]
     for name in ("MapleConfig", "MopoConfig"):
         assert f'id="rllib_asor.algorithms.maple.maple.{name}"' in pages["maple"]
     for name in ("lava.LavaWorldEnv", "mujoco_shift.MujocoShiftEnv", "traffic.HighwayDensityEnv"):
