@@ -49,7 +49,7 @@ def config(method: str, seed: int, steps: int):
         from rllib_asor.algorithms.sac.config import FastSACConfig
 
         cfg = FastSACConfig().rl_module(
-            model_config={"fcnet_hiddens": [128, 64], "fcnet_activation": "leaky_relu"}
+            model_config={"fcnet_hiddens": [128, 64], "fcnet_activation": "relu"}
         )
     elif method == "osi":
         from rllib_asor.algorithms.osi.config import OsiConfig
