@@ -48,7 +48,7 @@ YAML = """
 varpole:
   env: MyVarPole-v0
   run: PPO
-  stop: {training_iteration: 2}
+  stop: {training_iteration: 1}
   config:
     num_env_runners: 0
     train_batch_size: 256
