@@ -138,6 +138,7 @@ TO_DICT_KEYS: dict[str, str] = {
     "train_batch_size_per_learner": "_train_batch_size_per_learner",
     "env_to_module_connector": "_env_to_module_connector",
     "rl_module": "_rl_module_spec",
+    "learner_class": "_learner_class",
 }
 """Config key -> its key in `AlgorithmConfig.to_dict()` (the Tune param space), where RLlib
 stores the setting under a private attribute name."""

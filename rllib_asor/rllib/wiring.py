@@ -261,9 +261,9 @@ def _module_spec(config: AlgorithmConfig, asor: AsorConfig) -> AsorMultiRLModule
 
 # ------------------------------------------------------------------ arms that differ in ASOR
 ADDED_KEYS = (
-    "_learner_class",
+    compat.TO_DICT_KEYS["learner_class"],
     "learner_config_dict",
-    "_rl_module_spec",
+    compat.TO_DICT_KEYS["rl_module"],
     "callbacks",
     "policies_to_train",
 )
