@@ -100,10 +100,13 @@ def test_bad_settings_name_the_key_the_value_and_what_is_allowed(settings, match
 
 def test_dara_refuses_an_algorithm_it_is_not_wired_into():
     from ray.rllib.algorithms.cql import CQLConfig
+    from ray.rllib.algorithms.ppo import PPOConfig
 
     with pytest.raises(
-        ValueError, match=r"^DARA does not support algorithm 'CQL': supported MAPLE, MOPO$"
+        ValueError, match=r"^DARA does not support algorithm 'PPO': supported MAPLE, MOPO, CQL$"
     ):
+        with_dara(PPOConfig())
+    with pytest.raises(ValueError, match=r"^DARA on CQL needs the dataset parts first"):
         with_dara(CQLConfig())
 
 
@@ -201,3 +204,34 @@ def test_maple_dara_trains_from_python_and_its_checkpoint_round_trips(parts, tmp
         assert restored.train()["dara"]["cached"] == 1.0
     finally:
         restored.stop()
+
+
+def test_cql_dara_reads_the_relabelled_copies_and_trains(parts, hopper_offline_data, tmp_path):
+    from ray.rllib.algorithms.cql import CQLConfig
+
+    from rllib_asor.algorithms.cql.offline import offline_input
+
+    config = (
+        CQLConfig()
+        .env_runners(num_env_runners=0)
+        .learners(num_learners=0)
+        .training(train_batch_size_per_learner=64, bc_iters=0, lr=None)
+        .reporting(min_time_s_per_iteration=0, min_train_timesteps_per_iteration=0)
+    )
+    offline_input(
+        config,
+        hopper_offline_data,
+        quality="random",
+        dataset_num_iters_per_learner=2,
+        map_batches_kwargs={"concurrency": 1, "num_cpus": 0.5},
+    )
+    dara = with_dara(config, **FAST, eta=1.0, cache=str(tmp_path))
+    expected, _ = dara_parts(config.input_, {**FAST, "eta": 1.0, "cache": str(tmp_path)}, seed=0)
+    assert dara.input_ == expected and config.input_ != expected
+    assert dara.input_read_episodes
+    algo = dara.build_algo()
+    try:
+        result = algo.train()
+        assert np.isfinite(result["learners"][DEFAULT_MODULE_ID]["qf_loss"])
+    finally:
+        algo.stop()
