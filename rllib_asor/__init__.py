@@ -59,7 +59,7 @@ with_asor.__doc__ = _with_asor_doc()
 
 
 def with_dara(algo_config: Any, **dara_settings: Any) -> Any:
-    """Return a copy of `algo_config` (MAPLE or MOPO) with DARA's reward correction of the
+    """Return a copy of `algo_config` (MAPLE, MOPO or CQL) with DARA's reward correction of the
     source rows (`rllib_asor.algorithms.dara`; settings: `DaraSettings`). Bad settings raise
     ValueError naming the key, the value and what is allowed."""
     from rllib_asor.algorithms.dara.wiring import with_dara as _with_dara

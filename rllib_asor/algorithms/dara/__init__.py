@@ -10,5 +10,5 @@ source's transition probability (DARA's r − η·ΔR). The classifiers are DARC
 - `settings.py`: `DaraSettings`, the YAML `dara:` block;
 - `relabel.py`: train the classifiers on the dataset parts and write relabelled copies (numpy,
   pyarrow, torch; no ray);
-- `wiring.py`: `with_dara(config, **settings)` for MAPLE and MOPO.
+- `wiring.py`: `with_dara(config, **settings)` for MAPLE, MOPO and CQL.
 """
