@@ -42,6 +42,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="with a result key: mean of each trial's last N values (default 1)",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON list on stdout")
+    parser.add_argument(
+        "--table",
+        action="store_true",
+        help="the paper's layout instead: tasks as rows, methods as columns, mean ± 95 %% "
+        "interval over seeds, the best in bold (markdown)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,6 +58,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"rllib compare: error: --last-n: {args.last_n} is invalid: allowed an integer >= 1",
               file=sys.stderr)  # fmt: skip
         return 2
+    if getattr(args, "table", False):
+        from rllib_asor.report.table import render_table, table_cells
+
+        try:
+            print(render_table(*table_cells(args.results_dirs, args.metric, args.last_n)), end="")
+        except ValueError as e:
+            print(f"rllib compare: error: {e}", file=sys.stderr)
+            return 2
+        return 0
     try:
         comp = compare(args.results_dirs, args.baseline, args.metric, args.last_n)
     except ValueError as e:
