@@ -41,7 +41,9 @@ METRICS = ("success_rate", "goal_reward")
 
 def _check_count(name: str, value: Any, alternative: str = "") -> None:
     if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValueError(f"curriculum {name}={value!r} is not valid; allowed: an int >= 1{alternative}")
+        raise ValueError(
+            f"curriculum {name}={value!r} is not valid; allowed: an int >= 1{alternative}"
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,7 +76,9 @@ class MapCurriculum:
                 f"curriculum metric={self.metric!r} is not supported; allowed: {list(METRICS)}"
             )
         if isinstance(self.threshold, bool) or not isinstance(self.threshold, int | float):
-            raise ValueError(f"curriculum threshold={self.threshold!r} is not valid; allowed: a number")
+            raise ValueError(
+                f"curriculum threshold={self.threshold!r} is not valid; allowed: a number"
+            )
         if self.metric == "success_rate" and not 0.0 < self.threshold <= 1.0:
             raise ValueError(
                 f"curriculum threshold={self.threshold!r} is out of range for success_rate; "
