@@ -46,7 +46,8 @@ def train_classifiers(
     seed: int,
 ) -> tuple[DomainClassifiers, dict[str, float]]:
     """DARC's classifier pair trained for `classifier_steps` Adam steps on balanced batches
-    (`batch_size` rows of each domain); statistics on all rows at the end (no noise)."""
+    (`batch_size` rows of each domain); statistics on all rows at the end (no noise). On the
+    CPU: a one-off relabelling of the offline data before training, not the Learner's work."""
     rng = np.random.default_rng(seed)
     with torch.random.fork_rng():
         torch.manual_seed(seed)
@@ -54,11 +55,11 @@ def train_classifiers(
             source[0].shape[1], source[1].shape[1], settings.hidden, settings.input_noise
         )
         opt = torch.optim.Adam(model.parameters(), lr=settings.lr)
-        src = [torch.as_tensor(x, dtype=torch.float32) for x in source]
-        tgt = [torch.as_tensor(x, dtype=torch.float32) for x in target]
+        src = [torch.as_tensor(x, dtype=torch.float32, device="cpu") for x in source]
+        tgt = [torch.as_tensor(x, dtype=torch.float32, device="cpu") for x in target]
         for _ in range(settings.classifier_steps):
-            i = torch.as_tensor(rng.integers(0, len(src[0]), settings.batch_size))
-            j = torch.as_tensor(rng.integers(0, len(tgt[0]), settings.batch_size))
+            i = torch.as_tensor(rng.integers(0, len(src[0]), settings.batch_size), device="cpu")
+            j = torch.as_tensor(rng.integers(0, len(tgt[0]), settings.batch_size), device="cpu")
             loss, _ = classifier_loss(
                 model, tuple(x[i] for x in src), tuple(x[j] for x in tgt), noisy=True
             )
@@ -148,7 +149,7 @@ def load_classifiers(relabelled_part: str) -> DomainClassifiers:
     """The classifiers a relabelled copy was made with (from its `dara.json`)."""
     info = json.loads((Path(relabelled_part).parent.parent.parent / INFO).read_text())
     s = DaraSettings.from_dict(info["settings"])
-    state = {k: torch.as_tensor(v) for k, v in info["classifiers"].items()}
+    state = {k: torch.as_tensor(v, device="cpu") for k, v in info["classifiers"].items()}
     obs_dim = state["advantage.0.weight"].shape[1] - state["sa.0.weight"].shape[1]
     model = DomainClassifiers(
         obs_dim, state["sa.0.weight"].shape[1] - obs_dim, s.hidden, s.input_noise
@@ -168,9 +169,9 @@ def _episode_deltas(
     """Δr of every step of each episode."""
     out = []
     for obs, actions, _, _ in episodes:
-        o = torch.tensor(obs, dtype=torch.float32)
-        a = torch.tensor(actions, dtype=torch.float32)
-        out.append(delta_reward(model, o[:-1], a, o[1:], clip).numpy())
+        o = torch.tensor(obs, dtype=torch.float32, device="cpu")
+        a = torch.tensor(actions, dtype=torch.float32, device="cpu")
+        out.append(delta_reward(model, o[:-1], a, o[1:], clip).cpu().numpy())
     return out
 
 
