@@ -159,7 +159,6 @@ class EscpTorchRLModule(
 
     def _forward_train(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
         """SAC's quantities with ESCP's inputs (ESCP `SAC.sac_update`)."""
-        dist_cls = self.get_train_action_dist_cls()
         noise = self.escp.context_noise
         # Without autograd while the encoder cannot step (the Learner says so: RMDM not yet
         # switched on, or rmdm_scale 0): the same z, no graph for the GRU.
@@ -170,8 +169,20 @@ class EscpTorchRLModule(
         z_pi = add_context_noise(z.detach(), noise)
         z_pi_next = add_context_noise(z_next, noise)
         z_q = self.critic_context(batch[DYNAMICS_ID], z)
-        obs, next_obs, actions = batch[Columns.OBS], batch[Columns.NEXT_OBS], batch[Columns.ACTIONS]
+        return self.sac_outputs(batch, z, z_pi, z_pi_next, z_q)
 
+    def sac_outputs(
+        self,
+        batch: dict[str, Any],
+        context: torch.Tensor,
+        z_pi: torch.Tensor,
+        z_pi_next: torch.Tensor,
+        z_q: torch.Tensor,
+    ) -> dict[str, Any]:
+        """SAC's training outputs with π reading `z_pi` (`z_pi_next` on the next states) and
+        the critics `z_q`; `context` is returned as the `escp_context` output."""
+        dist_cls = self.get_train_action_dist_cls()
+        obs, next_obs, actions = batch[Columns.OBS], batch[Columns.NEXT_OBS], batch[Columns.ACTIONS]
         logits = self.policy_inputs(obs, z_pi)
         act_new, logp = dist_cls.from_logits(logits).rsample_and_logp()
         with torch.no_grad():
@@ -179,7 +190,7 @@ class EscpTorchRLModule(
             act_next, logp_next = dist_cls.from_logits(logits_next).sample_and_logp()
             q_target_next = self._q(next_obs, act_next, z_q, target=True)
         out = {
-            CONTEXT: z,
+            CONTEXT: context,
             Columns.ACTION_DIST_INPUTS: logits,
             "qf_preds": self._q_head(self.qf, obs, actions, z_q),
             "logp_resampled": logp,

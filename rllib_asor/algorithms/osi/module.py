@@ -15,7 +15,7 @@ from typing import Any
 import torch
 from ray.rllib.core.columns import Columns
 
-from rllib_asor.algorithms.escp.module import CONTEXT, EscpTorchRLModule
+from rllib_asor.algorithms.escp.module import EscpTorchRLModule
 from rllib_asor.algorithms.escp.replay import WINDOW
 from rllib_asor.algorithms.osi.network import OsiNetwork
 from rllib_asor.algorithms.osi.replay import PARAMS
@@ -41,36 +41,8 @@ class OsiTorchRLModule(EscpTorchRLModule):
 
     def _forward_train(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
         """SAC's quantities with the true μ for π and the critics; OSI's μ̂ (with gradient)."""
-        dist_cls = self.get_train_action_dist_cls()
         mu = batch[PARAMS].float()
-        mu_hat = self.context(batch[WINDOW])
-        obs, next_obs, actions = batch[Columns.OBS], batch[Columns.NEXT_OBS], batch[Columns.ACTIONS]
-        logits = self.policy_inputs(obs, mu)
-        act_new, logp = dist_cls.from_logits(logits).rsample_and_logp()
-        with torch.no_grad():
-            logits_next = self.policy_inputs(next_obs, mu)
-            act_next, logp_next = dist_cls.from_logits(logits_next).sample_and_logp()
-            q_target_next = self._q(next_obs, act_next, mu, target=True)
-        out = {
-            CONTEXT: mu_hat,
-            Columns.ACTION_DIST_INPUTS: logits,
-            "qf_preds": self._q_head(self.qf, obs, actions, mu),
-            "logp_resampled": logp,
-            "logp_next_resampled": logp_next,
-            "q_target_next": q_target_next,
-        }
-        if self.twin_q:
-            out["qf_twin_preds"] = self._q_head(self.qf_twin, obs, actions, mu)
-        critics = [self.qf, self.qf_twin] if self.twin_q else [self.qf]
-        params = [p for c in critics for p in c.parameters()]
-        for p in params:  # Q's gradient reaches π only
-            p.requires_grad_(False)
-        try:
-            out["q_curr"] = self._q(obs, act_new, mu)
-        finally:
-            for p in params:
-                p.requires_grad_(True)
-        return out
+        return self.sac_outputs(batch, self.context(batch[WINDOW]), mu, mu, mu)
 
     def forward_target(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
         mu = batch[PARAMS].float()
