@@ -151,8 +151,9 @@ def test_the_catalogue_covers_every_metric_of_a_real_iteration(cli_ray):
     from ray.tune.utils import flatten_dict
 
     runs = {
-        "PPO": ("CartPole-v1", PPOConfig().training(train_batch_size=64, minibatch_size=32,
-                                                    num_epochs=1)
+        # 256 steps and a fixed seed: episodes end in the iteration (their return is reported)
+        "PPO": ("CartPole-v1", PPOConfig().training(train_batch_size=256, minibatch_size=128,
+                                                    num_epochs=1).debugging(seed=0)
                 .evaluation(evaluation_interval=1, evaluation_duration=1)),
         "SAC": ("Pendulum-v1", SACConfig().training(train_batch_size=16,
                                                     num_steps_sampled_before_learning_starts=20)
