@@ -49,9 +49,12 @@ def validate_asor(exp: Experiment) -> None:
     from rllib_asor.asor.config import ALGORITHMS, AsorConfig
     from rllib_asor.rllib.wiring import supported_run
 
-    if supported_run(exp.run) is None:  # ALGORITHMS or a subclass of one (FastSAC)
+    if supported_run(exp.run) is None:  # ALGORITHMS or a subclass of one (FastSAC, OSI, ...)
+        from rllib_asor.registry.algorithms import ALGORITHMS as OURS
+
+        allowed = [*ALGORITHMS, *(n for n in OURS if n not in ALGORITHMS and supported_run(n))]
         raise UsageError(
-            f"ASOR does not support {exp.run!r}; allowed: {', '.join(ALGORITHMS)}, FastSAC",
+            f"ASOR does not support {exp.run!r}; allowed: {', '.join(allowed)}",
             source=exp.source,
             key=f"{exp.name}.run",
         )

@@ -34,6 +34,14 @@ def test_unknown_config_key_exits_2_with_file_key_and_allowed(write_yaml, capsys
     _assert_one_line(err, path, "x.config.num_sgd_iters", "unknown key for PPO", "allowed:")
 
 
+def test_asor_on_an_unsupported_run_names_every_run_it_takes(write_yaml, capsys):
+    path = write_yaml("x:\n  env: CartPole-v1\n  run: DQN\n  config: {asor: {}}\n")
+    rc, err = _run(capsys, ["train", "file", path, "--dry-run"])
+    assert rc == 2
+    _assert_one_line(err, path, "x.run", "ASOR does not support 'DQN'",
+                     "allowed: CQL, ESCP, MAPLE, PPO, SAC", "FastSAC", "OSI", "CaDM")  # fmt: skip
+
+
 def test_unknown_key_suggests_close_match(write_yaml, capsys):
     rc, err = _run(capsys, ["train", "file", write_yaml(GOOD_HEAD + "  config: {num_epoch: 3}\n")])
     assert rc == 2
