@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import median_paired_ratios, start_local_ray, time_interleaved, write_json
+from benchmarks.escp_speed import RllibRunner, escp_config
 
 ENV_ID = "rllib_asor/Walker2dShift-v0"
 ENV_CONFIG = {"params": ["gravity"], "num_tasks": 40, "task_seed": 0}
@@ -201,12 +202,12 @@ class PlainSac:
         self.env.close()
 
 
-class AlgoRunner:
-    """An RLlib algorithm stepped with `algo.train()` until a step target."""
+class AlgoRunner(RllibRunner):
+    """An RLlib algorithm stepped with `algo.train()` until a step target (escp_speed's
+    runner's `run` and `stop`, with this benchmark's algorithms)."""
 
     def __init__(self, name: str, args: argparse.Namespace) -> None:
         import rllib_asor
-        from benchmarks.escp_speed import escp_config
 
         if name in ("fast_sac", "sac_asor"):
             config = fast_sac_config(args, ENV_ID, ENV_CONFIG)
@@ -222,15 +223,6 @@ class AlgoRunner:
                 if hasattr(module.unwrapped(), "task_mean_context"):
                     module.unwrapped().value_context = "task_mean"
         self.steps = 0
-
-    def run(self, steps: int) -> int:
-        target = self.steps + steps
-        while self.steps < target:
-            self.steps = int(self.algo.train()["num_env_steps_sampled_lifetime"])
-        return self.steps
-
-    def stop(self) -> None:
-        self.algo.stop()
 
 
 class LearnerRunner:
@@ -362,7 +354,6 @@ def breakdown(args: argparse.Namespace) -> dict[str, dict[str, float]]:
     import torch
     from ray.rllib.core.columns import Columns
 
-    from benchmarks.escp_speed import escp_config
     from rllib_asor.algorithms.escp.replay import DYNAMICS_ID, NEXT_WINDOW, WINDOW
 
     n = args.breakdown_steps
