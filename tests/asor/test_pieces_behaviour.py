@@ -1,6 +1,6 @@
 """Exact values of ASOR's small pieces on hand-made inputs (mutation survivors):
 the discriminator's loss, statistics and regularisers, the archive's sampling, the partition's
-random mode and sizes, the bonus standardisation."""
+random mode and sizes, the bonus standardisation and the logit bonus's clip."""
 
 from __future__ import annotations
 
@@ -137,6 +137,31 @@ def test_standardising_a_constant_bonus_gives_zeros_not_nan():
     assert torch.equal(z, torch.zeros(4))
     z = standardize(torch.tensor([0.0, 2.0]), torch.tensor(1.0), torch.tensor(1.0), clip=3.0)
     assert torch.allclose(z, torch.tensor([-1.0, 1.0]), atol=1e-6)
+
+
+def test_the_standardised_bonus_is_clipped_on_both_sides():
+    z = standardize(torch.tensor([-50.0, 1.0, 50.0]), torch.tensor(1.0), torch.tensor(4.0), clip=3.0)
+    assert torch.allclose(z, torch.tensor([-3.0, 0.0, 3.0]), atol=1e-6)
+
+
+def test_the_logit_bonus_is_clipped_at_the_configured_logit_clip():
+    from rllib_asor.asor.config import AsorConfig
+    from rllib_asor.asor.update import AsorState, bonus_for_rows
+
+    cfg = AsorConfig(
+        preset="paper", reward_form="logit", logit_clip=2.0, bonus_norm="off", shaping="direct",
+        disc_hiddens=[1],
+    )
+    state = AsorState(cfg, 1)
+    hidden, out = state.disc.net[0], state.disc.net[2]
+    with torch.no_grad():  # logit = 10·relu(x) − 10
+        hidden.weight.fill_(1.0)
+        hidden.bias.zero_()
+        out.weight.fill_(10.0)
+        out.bias.fill_(-10.0)
+    x = torch.tensor([[0.0], [1.05], [3.0]])  # logits −10, 0.5, 20
+    bonus = bonus_for_rows(cfg, state, 0.5, x, x, torch.zeros(3), 0.9)
+    assert torch.allclose(bonus, 0.5 * torch.tensor([-2.0, 0.5, 2.0]), atol=1e-5)
 
 
 def test_one_state_is_drawn_and_empty_buckets_take_no_share():
