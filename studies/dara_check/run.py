@@ -1,0 +1,245 @@
+"""MAPLE+DARA against MAPLE on SlipEnv's mixed-dynamics data (README.md: question and rule, fixed first).
+
+OMP_NUM_THREADS=1 nice .venv/bin/python studies/dara_check/run.py [--iters N] [--seeds 0 1 2]
+
+Each finished run is saved to results.json at once; a rerun skips it. The stand-in datasets
+are written under data/ beside this file (`make_data`, seed fixed, the same for every run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+DATA = HERE / "data"
+ENV_ID = "dara_check/Slip-v0"
+METHODS = ("maple", "maple_dara")
+T, GOAL, LIMIT = 20, 6.0, 10.0
+EVAL_EPISODES = 20
+EPISODES = {"original": 25, "boost": 100}
+"""Episodes of each dynamics in the data: scarce target (original), plentiful source (boost)."""
+
+
+class SlipEnv(gym.Env):
+    """x ← x + a for a ≤ 0.5; above 0.5 the target (`original`) slips back (x − 1), the source
+    (`boost`) jumps (x + 2a). Reward 1 − |x′ − 6|/6, 20 steps, x0 ~ U(−0.5, 0.5), |x| ≤ 10."""
+
+    observation_space = gym.spaces.Box(-LIMIT, LIMIT, (2,), np.float32)
+    action_space = gym.spaces.Box(-1, 1, (1,), np.float32)
+
+    def __init__(self, dynamics: str = "original", seed: int = 0) -> None:
+        if dynamics not in EPISODES:
+            raise ValueError(f"dynamics={dynamics!r} is invalid: allowed {' | '.join(EPISODES)}")
+        self.dynamics = dynamics
+        self._rng = np.random.default_rng(seed)
+
+    def _obs(self) -> np.ndarray:
+        return np.array([self.x, self.t / T], np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+        self.x, self.t = float(self._rng.uniform(-0.5, 0.5)), 0
+        return self._obs(), {}
+
+    def step(self, action):
+        a = float(np.clip(np.asarray(action, dtype=np.float64).reshape(-1)[0], -1, 1))
+        if a <= 0.5:
+            dx = a
+        else:
+            dx = -1.0 if self.dynamics == "original" else 2.0 * a
+        self.x = float(np.clip(self.x + dx, -LIMIT, LIMIT))
+        self.t += 1
+        return self._obs(), 1.0 - abs(self.x - GOAL) / GOAL, False, self.t >= T, {}
+
+
+def register() -> None:
+    """The env id (its name holds `slip`) and MAPLE's model-rollout rule for it (never ends)."""
+    from rllib_asor.algorithms.maple import termination
+
+    if ENV_ID not in gym.registry:
+        gym.register(ENV_ID, entry_point=SlipEnv)
+    termination.RULES.setdefault("slip", lambda o: ~np.isfinite(o).all(-1))
+
+
+def rollout(policy, dynamics: str, episodes: int, seed: int) -> list[tuple]:
+    """(obs [T+1], actions [T], rewards [T]) of `episodes` episodes; policy(obs, rng) -> a."""
+    env, rng, out = SlipEnv(dynamics, seed), np.random.default_rng(seed + 1), []
+    for e in range(episodes):
+        obs, _ = env.reset(seed=seed * 1000 + e)
+        o, a, r = [obs], [], []
+        done = False
+        while not done:
+            act = np.asarray(policy(obs, rng), np.float32).reshape(1)
+            obs, rew, term, trunc, _ = env.step(act)
+            o.append(obs), a.append(act), r.append(rew)
+            done = term or trunc
+        out.append((np.array(o), np.array(a), np.array(r, np.float32)))
+    return out
+
+
+def behaviour(seed: int):
+    """The data's policy: a per-episode level c ~ U(−0.3, 1) plus N(0, 0.3) noise per step."""
+    level = {"c": 0.0}
+
+    def policy(obs: np.ndarray, rng: np.random.Generator) -> float:
+        if obs[1] == 0.0:
+            level["c"] = rng.uniform(-0.3, 1.0)
+        return float(np.clip(level["c"] + 0.3 * rng.normal(), -1, 1))
+
+    return policy
+
+
+def reference_policies() -> dict:
+    """Uniform random, and the target's best (a = 0.5 towards the goal, then hold)."""
+    return {
+        "random": lambda obs, rng: rng.uniform(-1, 1),
+        "optimal": lambda obs, rng: float(np.clip(GOAL - obs[0], -1, 0.5)),
+    }
+
+
+def make_data() -> list[str]:
+    """The two parts `data/slip/<dynamics>/mixed` (parquet rows of SingleAgentEpisode states,
+    `rllib data collect`'s layout), made once with seed 0 and 1."""
+    import msgpack
+    import msgpack_numpy as mnp
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    from ray.rllib.env.single_agent_episode import SingleAgentEpisode
+
+    parts = []
+    for i, (dyn, n) in enumerate(EPISODES.items()):
+        part = DATA / "slip" / dyn / "mixed"
+        parts.append(str(part))
+        if (part / "part-00000.parquet").is_file():
+            continue
+        rows = []
+        for obs, acts, rews in rollout(behaviour(i), dyn, n, seed=i):
+            ep = SingleAgentEpisode(
+                observation_space=SlipEnv.observation_space,
+                action_space=SlipEnv.action_space,
+            )
+            ep.add_env_reset(obs[0])
+            for k in range(len(acts)):
+                ep.add_env_step(obs[k + 1], acts[k], float(rews[k]), truncated=k == len(acts) - 1)
+            rows.append(msgpack.packb(ep.get_state(), default=mnp.encode))
+        part.mkdir(parents=True, exist_ok=True)
+        pq.write_table(pa.table({"item": pa.array(rows, type=pa.binary())}),
+                       (part / "part-00000.parquet").as_posix())  # fmt: skip
+    return parts
+
+
+def config(method: str, seed: int, parts: list[str], cache: Path):
+    """MAPLE (the paper's settings, the TF MAPLE's smaller ensemble, this check's budget),
+    with DARA's shipped defaults for `maple_dara`."""
+    import rllib_asor
+    from rllib_asor.algorithms.dara.wiring import with_dara
+
+    cfg = (
+        rllib_asor.MapleConfig()
+        .environment(ENV_ID, env_config={"dynamics": "original"})
+        .offline_data(input_=parts)
+        .maple(
+            ensemble="tf_maple",
+            horizon=10,
+            penalty_coef=0.25,
+            rollout_batch_size=2000,
+            steps_per_iteration=250,
+            gru_hidden=32,
+            context_dim=8,
+            hiddens=[64, 64],
+            evaluation_interval=0,
+            ensemble_cache=str(cache / "ensembles"),
+        )
+        .training(train_batch_size_per_learner=64)
+        .debugging(seed=seed, log_level="ERROR")
+    )
+    if method == "maple_dara":
+        cfg = with_dara(cfg, target_dynamics="original", cache=str(cache / "dara"))
+    return cfg
+
+
+def maple_policy(algo):
+    """The trained MAPLE policy, deterministic, its GRU context stepped (MAPLE's evaluation)."""
+    from rllib_asor.algorithms.maple.evaluation import maple_actor
+
+    nets = algo._module().nets
+    nets.eval()
+    actor = maple_actor(nets)
+    state = {"step": None}
+
+    def policy(obs: np.ndarray, rng: np.random.Generator) -> float:
+        if obs[1] == 0.0:
+            state["step"] = actor()
+        return state["step"](obs, {})
+
+    return policy
+
+
+def score(policy, seed: int) -> float:
+    """Mean return of EVAL_EPISODES episodes under the target dynamics (start seeds fixed)."""
+    return float(np.mean([r.sum() for _, _, r in rollout(policy, "original", EVAL_EPISODES,
+                                                             10_000 + seed)]))  # fmt: skip
+
+
+def run(method: str, seed: int, iters: int, parts: list[str]) -> dict:
+    if method in reference_policies():
+        return {"score": score(reference_policies()[method], seed), "seconds": 0.0}
+    t0 = time.perf_counter()
+    algo = config(method, seed, parts, HERE / "cache").build_algo()
+    try:
+        for _ in range(iters):
+            result = algo.train()
+        out = {"score": score(maple_policy(algo), seed)}
+        if "dara" in result:
+            out["dara"] = {k: float(v) for k, v in result["dara"].items()}
+    finally:
+        algo.stop()
+    return {**out, "seconds": time.perf_counter() - t0}
+
+
+def normalised(results: dict, key: str, seed: int) -> float:
+    """100·(R − R_random)/(R_optimal − R_random) on the same evaluation starts."""
+    lo, hi = results[f"random/seed{seed}"]["score"], results[f"optimal/seed{seed}"]["score"]
+    return 100 * (results[key]["score"] - lo) / (hi - lo)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--iters", type=int, default=50)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--methods", nargs="+", default=["random", "optimal", *METHODS])
+    args = parser.parse_args()
+    import ray
+    import torch
+
+    torch.set_num_threads(1)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    register()
+    parts = make_data()
+    out = HERE / "results.json"
+    results = json.loads(out.read_text()) if out.is_file() else {}
+    for seed in args.seeds:
+        for method in args.methods:
+            key = f"{method}/seed{seed}"
+            if key in results:
+                continue
+            results[key] = {"iters": args.iters, **run(method, seed, args.iters, parts)}
+            print(key, json.dumps(results[key]), flush=True)
+            out.write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
+    for method in args.methods:
+        keys = [f"{method}/seed{s}" for s in args.seeds if f"{method}/seed{s}" in results]
+        norm = [normalised(results, k, int(k.rsplit("seed", 1)[1])) for k in keys]
+        print(
+            f"{method:11s} normalised mean {np.mean(norm):7.1f}  seeds {np.round(norm, 1).tolist()}"
+        )
+
+
+if __name__ == "__main__":
+    main()
