@@ -216,11 +216,13 @@ def asor_mode(params: dict[str, Any]) -> str | None:
 
 
 def method_name(trial: Trial) -> str:
-    """``PPO``, ``PPO+ASOR``, ``SAC+SRPO``, ``PPO+ASOR(count)``, ..."""
+    """``PPO``, ``PPO+ASOR``, ``SAC+SRPO``, ``PPO+ASOR(count)``, ``MAPLE+DARA`` (a ``dara``
+    block: MAPLE's and MOPO's ``dara_settings``), ..."""
+    name = algo_name(trial) + ("+DARA" if trial.params.get("dara_settings") else "")
     mode = asor_mode(trial.params)
     if mode is None:
-        return algo_name(trial)
-    return algo_name(trial) + MODE_SUFFIX.get(mode, f"+ASOR({mode})")
+        return name
+    return name + MODE_SUFFIX.get(mode, f"+ASOR({mode})")
 
 
 def lookup(params: dict[str, Any], dotted: str) -> Any:
