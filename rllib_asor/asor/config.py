@@ -157,7 +157,7 @@ class AsorConfig(Settings):
     proxy: Proxy = "rnd"
     """Visitation-count proxy: rnd (Random Network Distillation), ensemble (disagreement), or
     rnd_per_dynamics (one RND predictor per dynamics id from `info["dynamics_id"]`; the count
-    under the least familiar dynamics — our extension, see rllib_asor.asor.rnd)."""
+    under the least familiar dynamics — our extension, see rllib_asor.asor.proxy)."""
     log_omega_min: Annotated[float, Field(gt=-1e6, lt=0), Allowed("a finite number < 0")] = -5.0
     """Lower clip of log ω (and of the gail bonus's sign-flipped counterpart), < 0."""
     disc_hiddens: Hiddens = [256, 256, 256]

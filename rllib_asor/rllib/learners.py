@@ -7,8 +7,11 @@ and builds the one `AsorRewardConnector` with the algorithm's adapter (`asor_ada
 Learner connector (PPO: right before GAE), or, where train batches bypass that pipeline, the
 Learner applies the same piece to its batch (`_apply_asor`). It also gives the auxiliary
 modules their own Adam optimisers (learning rates from `AsorConfig`, frozen RND target
-excluded). Every Learner here also has `SameMathSpeedMixin` (learner_speed.py): one nan/inf
-check per update, fused Adam, and a Learner connector without autograd.
+excluded).
+
+Each ASOR Learner here is the ASOR mixin on exactly the Learner the config uses without ASOR
+(RLlib's for a stock config; `LeanPPOTorchLearner`, `FastSACTorchLearner`, ESCP's, MAPLE's
+where the config chose them), so an A/B of ASOR compares one Learner with and without ASOR.
 """
 
 from __future__ import annotations
@@ -37,13 +40,15 @@ from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common.asor_adapter import AsorAdapter
 from rllib_asor.algorithms.common.ddp import SortedModuleGradientsMixin
-from rllib_asor.algorithms.common.learner_speed import SameMathSpeedMixin
 from rllib_asor.algorithms.common.pipeline import insert_beside
 from rllib_asor.algorithms.cql.asor_adapter import CQLAsorAdapter
+from rllib_asor.algorithms.escp.learner import EscpTorchLearner
+from rllib_asor.algorithms.maple.asor_adapter import MapleAsorAdapter
+from rllib_asor.algorithms.maple.learner import MapleTorchLearner
 from rllib_asor.algorithms.ppo.asor_adapter import PPOAsorAdapter
-from rllib_asor.algorithms.ppo.lean import LeanPPOMixin
+from rllib_asor.algorithms.ppo.lean import LeanPPOTorchLearner
 from rllib_asor.algorithms.sac.asor_adapter import SACAsorAdapter
-from rllib_asor.algorithms.sac.learner import FastSACLearnerMixin
+from rllib_asor.algorithms.sac.learner import FastSACLearnerMixin, FastSACTorchLearner
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.rllib.connector import (
@@ -91,12 +96,21 @@ def policy_minibatches(batch: MultiAgentBatch, num_epochs: int, minibatch_size: 
 logger = logging.getLogger(__name__)
 
 
-class AsorLearnerMixin(SameMathSpeedMixin):
+class AsorLearnerMixin:
     """Builds the ASOR piece with the algorithm's adapter and puts it in the Learner's pipeline,
     or applies it to batches that bypass the pipeline; mix in before the algorithm's Learner."""
 
     asor_adapter: AsorAdapter = PPOAsorAdapter()
     """The algorithm's answers to the piece (which value, which rows, where the reward goes)."""
+
+    @staticmethod
+    def asor_learner_on(base: type) -> type:
+        """The ASOR Learner of this package that adds ASOR to `base` and nothing else (e.g.
+        `drop_bootstrap_rows` moving a PPO+ASOR config onto `LeanPPOTorchLearner`)."""
+        for candidate in ASOR_LEARNERS:
+            if base in candidate.__bases__:
+                return candidate
+        raise ValueError(f"no ASOR Learner on {base.__name__}; allowed: {_bases()}")
 
     def build(self) -> None:
         super().build()  # type: ignore[misc]
@@ -266,8 +280,14 @@ class AsorLearnerMixin(SameMathSpeedMixin):
         )
 
 
-class AsorPPOTorchLearner(AsorLearnerMixin, LeanPPOMixin, PPOTorchLearner):
-    """PPO's torch Learner with ASOR's reward augmentation before GAE."""
+class AsorPPOTorchLearner(AsorLearnerMixin, PPOTorchLearner):
+    """RLlib's PPO Learner with ASOR's reward augmentation before GAE."""
+
+    asor_adapter = PPOAsorAdapter()
+
+
+class AsorLeanPPOTorchLearner(AsorLearnerMixin, LeanPPOTorchLearner):
+    """`LeanPPOTorchLearner` (the race's PPO Learner) with ASOR's reward augmentation before GAE."""
 
     asor_adapter = PPOAsorAdapter()
 
@@ -306,9 +326,23 @@ class FastSoftQAsorMixin(FastSACLearnerMixin, _SoftQAsorMixin):
         return super().aux_rows(module_id)
 
 
-class AsorSACTorchLearner(FastSoftQAsorMixin, SACTorchLearner):
-    """SAC's torch Learner with ASOR; with `n_step > 1` the bonus is added to the n-step sum
-    once (for s_t), an approximation of Σ γ^k λ·b(s_{t+k})."""
+class AsorSACTorchLearner(_SoftQAsorMixin, SACTorchLearner):
+    """RLlib's SAC Learner with ASOR: the piece ends the Learner connector; with `n_step > 1`
+    the bonus is added to the n-step sum once (for s_t), an approximation of
+    Σ γ^k λ·b(s_{t+k})."""
+
+
+class AsorFastSACTorchLearner(FastSoftQAsorMixin, FastSACTorchLearner):
+    """The fast path's SAC Learner (`FastSACConfig`) with ASOR: the piece runs once per Learner
+    call on the batch built from the flat buffer's columns."""
+
+
+class AsorESCPTorchLearner(FastSoftQAsorMixin, EscpTorchLearner):
+    """ESCP's Learner with ASOR (the paper's Algorithm 1) on the fast path's batches, built
+    from ESCP's replay rows with their windows and task ids; V(s) is ESCP's own
+    `state_values` (min Q(s, tanh μ(s, z), z̄_task), SAC's adapter asks the module), and
+    r_t += λ·b(s_t) goes in before the TD targets. ESCP's encoder, RMDM and critics are
+    untouched."""
 
 
 class AsorCQLTorchLearner(_SoftQAsorMixin, CQLTorchLearner):
@@ -317,3 +351,30 @@ class AsorCQLTorchLearner(_SoftQAsorMixin, CQLTorchLearner):
     number of dataset rows ranked so far (`algorithms/cql/asor_adapter.py`)."""
 
     asor_adapter = CQLAsorAdapter()
+
+
+class AsorMapleTorchLearner(AsorLearnerMixin, MapleTorchLearner):
+    """MAPLE's Learner (MOPO's too) with ASOR. MAPLE's batches bypass the Learner connector,
+    so the Learner applies the piece to each batch before the SAC step; MAPLE's adapter ranks
+    the real transitions (`real_*` columns) by V(s) = min Q(s, π(s)) with their GRU contexts
+    and writes λ·b(s) of every segment step (real and model) into `asor_bonus`, which MAPLE's
+    loss adds to the rewards. Offline: λ's timestep is the number of real rows ranked so far
+    (not checkpointed)."""
+
+    asor_adapter = MapleAsorAdapter()
+
+
+ASOR_LEARNERS: tuple[type, ...] = (
+    AsorPPOTorchLearner,
+    AsorLeanPPOTorchLearner,
+    AsorSACTorchLearner,
+    AsorFastSACTorchLearner,
+    AsorESCPTorchLearner,
+    AsorCQLTorchLearner,
+    AsorMapleTorchLearner,
+)
+"""Every ASOR Learner: the ASOR mixin on one Learner (the last of its bases)."""
+
+
+def _bases() -> str:
+    return ", ".join(c.__bases__[-1].__name__ for c in ASOR_LEARNERS)

@@ -34,18 +34,18 @@ from rllib_asor.algorithms.sac.learner import FastSACTorchLearner
 from rllib_asor.asor.config import ALGORITHMS, AsorConfig
 from rllib_asor.registry.env_names import register_env
 from rllib_asor.rllib.callbacks import AsorMetricsCallback, DropNaNLearnerStatsCallback
-from rllib_asor.rllib.escp_asor import AsorESCPTorchLearner
 from rllib_asor.rllib.learners import (
+    ASOR_LEARNERS,
     AsorCQLTorchLearner,
+    AsorESCPTorchLearner,
     AsorLearnerMixin,
+    AsorMapleTorchLearner,
     AsorPPOTorchLearner,
     AsorSACTorchLearner,
-    FastSoftQAsorMixin,
     disc_module_id,
     is_aux_module,
     proxy_module_id,
 )
-from rllib_asor.rllib.maple_asor import AsorMapleTorchLearner
 from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 
 SUPPORTED = {
@@ -57,15 +57,9 @@ SUPPORTED = {
 }
 assert tuple(sorted(SUPPORTED)) == ALGORITHMS, "one list of supported algorithms (asor.config)"
 
-
-class AsorFastSACTorchLearner(FastSoftQAsorMixin, FastSACTorchLearner):
-    """The fast path's SAC Learner (`FastSACConfig`) with ASOR: the piece runs once per Learner
-    call on the batch built from the flat buffer's columns."""
-
-
-SPECIFIC = (AsorFastSACTorchLearner,)
-"""ASOR Learners for Learner subclasses of ours, tried after `SUPPORTED`'s: `asor_learner_class`
-takes the first that subclasses the config's Learner."""
+SPECIFIC = tuple(c for c in ASOR_LEARNERS if c not in SUPPORTED.values())
+"""ASOR Learners on Learners of ours (`LeanPPOTorchLearner`, `FastSACTorchLearner`), tried after
+`SUPPORTED`'s: `asor_learner_class` takes the first that subclasses the config's Learner."""
 
 
 class AsorMultiRLModuleSpec(MultiRLModuleSpec):

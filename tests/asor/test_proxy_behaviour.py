@@ -8,15 +8,16 @@ import pytest
 import torch
 
 from rllib_asor.asor.config import AsorConfig
-from rllib_asor.asor.ensemble import DynamicsEnsemble
 from rllib_asor.asor.proxy import (
+    RND,
+    DynamicsEnsemble,
     EnsembleProxy,
+    PerDynamicsRND,
     PerDynamicsRndProxy,
     ProxyInputs,
     RndProxy,
     make_proxy,
 )
-from rllib_asor.asor.rnd import RND, PerDynamicsRND
 
 
 def data(n=512, dim=3, seed=0):

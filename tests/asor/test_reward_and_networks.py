@@ -8,10 +8,9 @@ import torch
 
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.discriminator import Discriminator, discriminator_loss
-from rllib_asor.asor.ensemble import DynamicsEnsemble
 from rllib_asor.asor.networks import RunningMeanStd
+from rllib_asor.asor.proxy import RND, DynamicsEnsemble
 from rllib_asor.asor.reward import dual_ascent_step, reward_bonus, scheduled_lambda
-from rllib_asor.asor.rnd import RND
 
 EXTREME = torch.tensor([-1e30, -1e4, -50.0, -1.0, 0.0, 1.0, 50.0, 1e4, 1e30])
 
@@ -168,7 +167,7 @@ def test_config_accepts_lambda_alias_schedule_and_auto():
 
 
 def test_per_dynamics_rnd_counts_states_seen_under_every_dynamics_higher():
-    from rllib_asor.asor.rnd import PerDynamicsRND
+    from rllib_asor.asor.proxy import PerDynamicsRND
 
     torch.manual_seed(0)
     rnd = PerDynamicsRND(4, [64, 64], 16, buckets=4, seed=0)

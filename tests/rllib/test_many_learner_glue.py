@@ -2,7 +2,7 @@
 gets and the aux batches it trains on are exactly those one Learner computes on both ranks'
 episodes together — its own rows' bonus, an equal share of the discriminator's and the proxy's
 batches (rllib_asor/rllib/connector.py, "Several Learners"); for MAPLE+ASOR the same with the
-real states of both ranks ranked together (rllib_asor/rllib/maple_asor.py)."""
+real states of both ranks ranked together (`AsorMapleTorchLearner`, rllib_asor/rllib/learners.py)."""
 
 from __future__ import annotations
 

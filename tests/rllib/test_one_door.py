@@ -63,8 +63,8 @@ def test_no_learner_reads_the_pieces_state():
         ("rllib_asor.rllib.learners:AsorPPOTorchLearner", "ppo"),
         ("rllib_asor.rllib.learners:AsorSACTorchLearner", "sac"),
         ("rllib_asor.rllib.learners:AsorCQLTorchLearner", "cql"),
-        ("rllib_asor.rllib.escp_asor:AsorESCPTorchLearner", "escp"),
-        ("rllib_asor.rllib.maple_asor:AsorMapleTorchLearner", "maple"),
+        ("rllib_asor.rllib.learners:AsorESCPTorchLearner", "sac"),
+        ("rllib_asor.rllib.learners:AsorMapleTorchLearner", "maple"),
     ],
 )
 def test_each_asor_learner_takes_its_algorithms_adapter(learner, algorithm):

@@ -419,7 +419,12 @@ def test_robust_ppo_with_the_ensemble_proxy_still_fills_the_archive(ray_session)
 
 
 def test_nan_gradients_are_zeroed_with_one_check_as_rllib_does(ray_session, caplog):
-    algo = lava_ppo().build_algo()
+    """The one-check speed-up of `LeanPPOTorchLearner` (which ASOR keeps, not adds), with
+    ASOR's modules among the parameters."""
+    from rllib_asor.algorithms.ppo.lean import LeanPPOTorchLearner
+
+    config = lava_ppo_config().learners(learner_class=LeanPPOTorchLearner)
+    algo = rllib_asor.with_asor(config, preset="paper", lambda_=0.1, seed=0).build_algo()
     try:
         learner = algo.learner_group._learner
         assert learner._check_gradients_once and learner.config.torch_skip_nan_gradients

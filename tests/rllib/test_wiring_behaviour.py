@@ -37,20 +37,20 @@ from rllib_asor.asor.config import AsorConfig
 from rllib_asor.registry import envs
 from rllib_asor.rllib import trainable
 from rllib_asor.rllib.callbacks import AsorMetricsCallback, lift_asor_metrics
-from rllib_asor.rllib.escp_asor import AsorESCPTorchLearner
 from rllib_asor.rllib.learners import (
     AsorCQLTorchLearner,
+    AsorESCPTorchLearner,
+    AsorFastSACTorchLearner,
+    AsorMapleTorchLearner,
     AsorPPOTorchLearner,
     AsorSACTorchLearner,
     disc_module_id,
     proxy_module_id,
 )
-from rllib_asor.rllib.maple_asor import AsorMapleTorchLearner
 from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
 from rllib_asor.rllib.trainable import _asor_init, asor_trainable
 from rllib_asor.rllib.wiring import (
     SUPPORTED,
-    AsorFastSACTorchLearner,
     AsorMultiRLModuleSpec,
     _algorithm_name,
     _AlsoTrainAux,

@@ -30,10 +30,14 @@ from rllib_asor.algorithms.ppo.lean import LeanPPOTorchLearner
 from rllib_asor.algorithms.sac.config import FastSAC
 from rllib_asor.algorithms.sac.fast import FAST_KEY, FastSACTorchRLModule
 from rllib_asor.algorithms.sac.learner import FastSACTorchLearner
-from rllib_asor.rllib.learners import AsorPPOTorchLearner, AsorSACTorchLearner, is_aux_module
+from rllib_asor.rllib.learners import (
+    AsorFastSACTorchLearner,
+    AsorPPOTorchLearner,
+    AsorSACTorchLearner,
+    is_aux_module,
+)
 from rllib_asor.rllib.wiring import (
     ADDED_KEYS,
-    AsorFastSACTorchLearner,
     arm_differences,
     asor_learner_class,
 )
@@ -119,6 +123,8 @@ def test_the_arms_differ_only_in_what_asor_adds(name):
     # the ASOR Learner is the base Learner plus ASOR
     assert treated.learner_class is not base.learner_class
     assert issubclass(treated.learner_class, base.learner_class)
+    # ... and nothing else: ASOR's mixin directly on that Learner, no speed-ups of its own
+    assert treated.learner_class.__bases__[-1] is base.learner_class
 
     # what the built algorithms run: the same replay buffer and update rhythm
     ran_base, ran_treated = runs(base), runs(treated)
@@ -178,9 +184,9 @@ def test_arm_differences_names_what_else_changed():
 
 
 def test_the_asor_learner_subclasses_the_users_learner_or_refuses():
-    assert asor_learner_class(PPOConfig().learners(learner_class=LeanPPOTorchLearner)) is (
-        AsorPPOTorchLearner  # LeanPPOTorchLearner adds nothing AsorPPOTorchLearner lacks
-    )
+    assert asor_learner_class(PPOConfig()) is AsorPPOTorchLearner
+    lean = asor_learner_class(PPOConfig().learners(learner_class=LeanPPOTorchLearner))
+    assert lean.__bases__[-1] is LeanPPOTorchLearner
     sac = SACConfig().learners(learner_class=FastSACTorchLearner)
     assert asor_learner_class(sac) is AsorFastSACTorchLearner
 

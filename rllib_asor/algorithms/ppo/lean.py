@@ -44,8 +44,8 @@ def drop_enabled(config: AlgorithmConfig) -> bool:
 def drop_bootstrap_rows(config: AlgorithmConfig, enabled: bool = True) -> AlgorithmConfig:
     """A copy of the PPO `config` whose Learner drops the masked bootstrap rows after GAE.
 
-    Plain PPO gets `LeanPPOTorchLearner`; a config with ASOR keeps its Learner, which reads the
-    same key (either order of `with_asor` and this works)."""
+    Plain PPO gets `LeanPPOTorchLearner`; a config with ASOR gets ASOR on that Learner (its
+    Learner class says which: `asor_learner_on`), so either order of `with_asor` and this works."""
     if config.algo_class is None or not issubclass(config.algo_class, PPO):
         name = getattr(config.algo_class, "__name__", type(config).__name__)
         raise ValueError(f"drop_bootstrap_rows needs a PPO config, got {name}")
@@ -53,6 +53,8 @@ def drop_bootstrap_rows(config: AlgorithmConfig, enabled: bool = True) -> Algori
     learner = compat.user_learner_class(config)
     if learner is None:
         config.learners(learner_class=LeanPPOTorchLearner)
+    elif learner.__bases__[-1] is PPOTorchLearner and hasattr(learner, "asor_learner_on"):
+        config.learners(learner_class=learner.asor_learner_on(LeanPPOTorchLearner))
     elif not issubclass(learner, LeanPPOMixin):
         raise ValueError(
             f"drop_bootstrap_rows: the Learner class {learner.__name__} would "

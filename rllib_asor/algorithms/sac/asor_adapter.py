@@ -1,5 +1,6 @@
-"""SAC's answers to the ASOR piece: V(s) = min(Q1, Q2)(s, π(s)) ranks the replayed states,
-every row is ranked, and λ·b(s) goes into the rewards before the TD target (the piece sits at
+"""SAC's answers to the ASOR piece (and those of SAC's kin: ESCP, OSI): V(s) = min(Q1, Q2)(s, π(s))
+ranks the replayed states, or the module's own `state_values(batch)` where it has one (ESCP's
+and OSI's, with their contexts); every row is ranked, and λ·b(s) goes into the rewards before the TD target (the piece sits at
 the end of the Learner connector; on the fast path the Learner applies it to the batch it
 builds from the flat buffer's rows)."""
 
@@ -35,4 +36,5 @@ class SACAsorAdapter(AsorAdapter):
     """SAC: soft-Q state values, the bonus on every replayed row's reward."""
 
     def state_values(self, module: Any, batch: dict[str, Any]) -> torch.Tensor:
-        return soft_q_state_values(module, batch)
+        own = getattr(module, "state_values", None)  # ESCP's, OSI's: V(s) with their context
+        return own(batch) if callable(own) else soft_q_state_values(module, batch)

@@ -159,7 +159,7 @@ def test_osi_trains_on_a_users_env_policy_on_true_parameters_osi_by_regression(r
 def test_osi_with_asor_keeps_osis_losses_and_adds_the_bonus(ray_session):
     import rllib_asor
     from rllib_asor.algorithms.osi.learner import OsiLearnerMixin
-    from rllib_asor.rllib.escp_asor import AsorESCPTorchLearner
+    from rllib_asor.rllib.learners import AsorESCPTorchLearner
 
     algo = rllib_asor.with_asor(_config(), seed=0).build_algo()
     try:
