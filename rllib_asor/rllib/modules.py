@@ -46,6 +46,9 @@ class _LearnerOnlyModule(TorchRLModule, SelfSupervisedLossAPI):
     """Shared set-up: the ASOR config and the feature size of the observation."""
 
     asor: AsorConfig
+    disjoint_optimizer_losses = True
+    """One optimizer whose loss reaches only this module's parameters (the RND target is
+    frozen): the fast off-policy Learner steps it with one backward pass, as its SAC modules."""
 
     def setup(self) -> None:
         self.asor = AsorConfig.from_dict(self.model_config["asor"])
