@@ -203,6 +203,11 @@ def test_the_asor_learner_subclasses_the_users_learner_or_refuses():
         with_asor(SACConfig().learners(learner_class=MySAC))
     assert issubclass(asor_learner_class(PPOConfig()), PPOTorchLearner)
 
+    # moving an ASOR config onto another Learner keeps ASOR (drop_bootstrap_rows does this)
+    assert AsorPPOTorchLearner.asor_learner_on(LeanPPOTorchLearner) is lean
+    with pytest.raises(ValueError, match="no ASOR Learner on MySAC; allowed: PPOTorchLearner, "):
+        AsorPPOTorchLearner.asor_learner_on(MySAC)
+
 
 def test_per_dynamics_rnd_is_refused_on_the_flat_buffer_only():
     with pytest.raises(ValueError, match="proxy='rnd_per_dynamics' needs each step's dynamics"):
