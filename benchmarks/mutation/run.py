@@ -6,9 +6,11 @@
 
 For each package: the working tree (tracked and untracked-but-not-ignored files) is copied to
 build/mutation/<package>/, the package's [tool.mutmut] settings are appended to that copy's
-pyproject.toml, and `mutmut run` is started there under `nice -n 19` (or `--nice N`), so
-mutmut's `mutants/` sandbox never appears in the checkout, and a second run reuses the first
-one's results for every function whose source and tests did not change. Then the kill ratio is computed:
+pyproject.toml, a package's `undecorate` decorators are rebound after their functions in that
+copy (mutmut skips decorated functions), and `mutmut run` is started there under `nice -n 19`
+(or `--nice N`), so mutmut's `mutants/` sandbox never appears in the checkout, and a second
+run reuses the first one's results for every function whose source and tests did not change.
+Then the kill ratio is computed:
 
     killed / (mutants − equivalent)       killed includes timeouts; "no tests" counts as survived
 
@@ -20,6 +22,7 @@ its threshold or a survivor is neither killed nor listed as equivalent (and --ch
 from __future__ import annotations
 
 import argparse
+import ast
 import fnmatch
 import json
 import os
@@ -80,6 +83,39 @@ def sync_tree(dest: Path) -> None:
         for path in (dest / sub).rglob("*.py") if (dest / sub).exists() else ():
             if str(path.relative_to(dest)) not in files:
                 path.unlink()
+
+
+def undecorated(source: str, decorators: list[str]) -> str:
+    """`source` with each function whose only decorator is one of `decorators` (their source
+    text, e.g. "torch.no_grad()") rebound after its body instead: `@d` + `def f` becomes
+    `def f` + `f = d(f)`, the same object under the same name. mutmut 3.8 does not mutate a
+    decorated function (other than a classmethod or staticmethod); undecorated, it does."""
+    tree = ast.parse(source)
+    lines = source.splitlines(keepends=True)
+    edits = []  # (first line of the decorator, last line of the function, name, decorator)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and len(node.decorator_list) == 1:
+            dec = ast.get_source_segment(source, node.decorator_list[0])
+            if dec in decorators and node.end_lineno is not None:
+                edits.append((node.decorator_list[0].lineno, node.end_lineno, node.name, dec))
+    for dec_line, end, name, dec in sorted(edits, reverse=True):  # bottom up: numbers stay valid
+        indent = lines[dec_line - 1][: len(lines[dec_line - 1]) - len(lines[dec_line - 1].lstrip())]
+        lines.insert(end, f"{indent}{name} = {dec}({name})\n")
+        del lines[dec_line - 1]
+    return "".join(lines)
+
+
+def undecorate_tree(dest: Path, pkg: dict) -> None:
+    """Apply `undecorated` to the package's mutated files in the copy (not the checkout)."""
+    decorators = list(pkg.get("undecorate", []))
+    if not decorators:
+        return
+    for pattern in pkg["only_mutate"]:
+        for path in sorted(dest.glob(pattern)):
+            text = path.read_text()
+            new = undecorated(text, decorators)
+            if new != text:
+                path.write_text(new)
 
 
 def write_config(dest: Path, defaults: dict, pkg: dict) -> None:
@@ -221,12 +257,17 @@ def main(argv: list[str] | None = None) -> int:
         if not args.report:
             dest.mkdir(parents=True, exist_ok=True)
             sync_tree(dest)
+            undecorate_tree(dest, pkg)
             write_config(dest, defaults, pkg)
             names = list(pkg.get("mutants", []))
             if (dest / "mutants").exists():  # a later run: keep every verdict, test the rest
                 if args.rerun_open:
                     last = summarise(name, dest, pkg, equivalent.get(name, {}))
                     forget_verdicts(dest, set(last["open_survivors"]))
+                    # mutmut re-collects which tests run which function only for new tests:
+                    # a function new to the source (or newly mutated) keeps "no tests" until
+                    # the stats are collected again in full (one run of the selected tests)
+                    (dest / "mutants" / "mutmut-stats.json").unlink(missing_ok=True)
                 if names:
                     skip_unselected(dest, names)
                     names = []
