@@ -24,6 +24,7 @@ from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.discriminator import Discriminator, discriminator_loss
 from rllib_asor.asor.encoding import flatten
 from rllib_asor.asor.partition import partition
+from rllib_asor.asor.proxy import make_proxy
 from rllib_asor.asor.reward import explained_variance
 from rllib_asor.asor.update import AsorState, asor_update
 from tests.asor.test_state_behaviour import DIM, episodes
@@ -130,3 +131,34 @@ def test_the_critic_ev_of_an_update_under_another_default() -> None:
         got_ev, got_delta = update(state)
     assert got_ev == ev == pytest.approx(1.0)  # V is the chunks' discounted return
     assert _on_cpu(got_delta) and torch.equal(got_delta, delta)
+
+
+def test_the_archive_update_under_another_default_device_and_dtype() -> None:
+    """The robust default (archive): a first batch whose episodes are still open (nothing to
+    draw), then one that ends them (the archive is filled, and drawn from)."""
+    cfg = AsorConfig(seed=0, disc_hiddens=[8], rnd_hiddens=[8], rnd_embedding_dim=4)
+    batches = [episodes(0, terminated=False), episodes(1)]
+
+    def run(state: AsorState, proxy: torch.nn.Module) -> list:
+        rng = np.random.default_rng(0)
+        return [asor_update(cfg, state, proxy, b, rng) for b in batches]
+
+    def build() -> tuple[AsorState, torch.nn.Module]:
+        torch.manual_seed(0)
+        proxy = make_proxy(cfg, DIM, 2, seed=1)
+        assert proxy is not None
+        return AsorState(cfg, DIM), proxy
+
+    expected = run(*build())
+    parts = build()
+    with torch.device("meta"):
+        on_meta = run(*parts)
+    parts = build()
+    with default_dtype(torch.float64):
+        in_float64 = run(*parts)
+    assert int(expected[0].disc_labels.sum()) == 0 and int(expected[1].disc_labels.sum()) > 0
+    for got in (on_meta, in_float64):
+        for a, b in zip(expected, got, strict=True):
+            for name in ("reward_delta", "disc_features", "disc_labels"):
+                x, y = getattr(a, name), getattr(b, name)
+                assert _on_cpu(y) and y.dtype == torch.float32 and torch.equal(x, y), name

@@ -186,3 +186,11 @@ def test_make_proxy_builds_the_named_proxy_from_the_settings(name, cls):
     if name != "ensemble":  # the seed fixes RND's networks
         for pa, pb in zip(proxy.parameters(), again.parameters(), strict=True):
             assert torch.equal(pa, pb)
+
+
+def test_per_dynamics_count_before_any_dynamics_is_seen_averages_the_predictors():
+    rnd = PerDynamicsRND(3, [8], 4, buckets=3, seed=0)
+    x = torch.randn(5, 3, generator=torch.Generator().manual_seed(0))
+    errors = rnd.errors(x)
+    counts = rnd.count_proxy(x)
+    assert counts.shape == (5,) and torch.allclose(counts, -errors.mean(0))
