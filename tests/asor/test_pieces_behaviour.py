@@ -215,3 +215,24 @@ def test_the_missing_next_states_warning_is_logged_at_most_once(caplog):
     # once per process: an earlier test may have logged it already
     assert sum("no next states" in r.getMessage() for r in caplog.records) <= 1
     assert result.metrics["potential"] == 0.0  # the direct form instead
+
+
+def test_running_statistics_skip_an_empty_batch_and_count_a_single_row():
+    from rllib_asor.asor.networks import RunningMeanStd
+
+    rms = RunningMeanStd(2)
+    rms.update(torch.zeros(0, 2))
+    assert rms.mean.tolist() == [0.0, 0.0] and rms.var.tolist() == [1.0, 1.0]
+    rms.update(torch.tensor([[4.0, -2.0]]))
+    assert torch.allclose(rms.mean, torch.tensor([4.0, -2.0]), atol=1e-3)
+    assert rms.count.item() == pytest.approx(1.0001)
+
+
+def test_running_statistics_of_a_float16_batch_are_those_of_its_values_in_float64():
+    from rllib_asor.asor.networks import RunningMeanStd
+
+    x = (100.0 + torch.randn(1000, 2, generator=torch.Generator().manual_seed(0))).half()
+    low, high = RunningMeanStd(2), RunningMeanStd(2)
+    low.update(x)
+    high.update(x.double())
+    assert torch.equal(low.mean, high.mean) and torch.equal(low.var, high.var)

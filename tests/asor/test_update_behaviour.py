@@ -115,3 +115,11 @@ def test_a_full_archive_keeps_the_newest_of_many_equal_return_episodes() -> None
         arch.insert(torch.full((4, 1), float(i)), torch.zeros(4), 1.0, dynamics_id=0)
     kept = sorted({int(v) for v in arch.features[0, :40, 0].tolist()})
     assert kept == list(range(20, 30))
+
+
+def test_the_reward_delta_has_the_dtype_of_the_env_rewards() -> None:
+    cfg = AsorConfig(**SMALL, preset="paper", mode="srpo", lambda_=0.3)
+    batch = episodes(0)
+    wide = AsorBatch(batch.features, batch.env_rewards.double(), batch.values, gamma=batch.gamma)
+    result = asor_update(cfg, *_build(cfg), wide, np.random.default_rng(0))
+    assert result.reward_delta.dtype == torch.float64 and result.reward_delta.abs().sum() > 0
