@@ -86,22 +86,30 @@ def sync_tree(dest: Path) -> None:
 
 
 def undecorated(source: str, decorators: list[str]) -> str:
-    """`source` with each function whose only decorator is one of `decorators` (their source
-    text, e.g. "torch.no_grad()") rebound after its body instead: `@d` + `def f` becomes
-    `def f` + `f = d(f)`, the same object under the same name. mutmut 3.8 does not mutate a
-    decorated function (other than a classmethod or staticmethod); undecorated, it does."""
+    """`source` with each function whose decorators are all among `decorators` (their source
+    text, e.g. "torch.no_grad()") rebound after its body instead: `@d1 @d2 def f` becomes
+    `def f` + `f = d1(d2(f))`, the same object under the same name. mutmut 3.8 does not mutate
+    a decorated function other than a lone classmethod or staticmethod (left as they are);
+    undecorated, it does."""
     tree = ast.parse(source)
     lines = source.splitlines(keepends=True)
-    edits = []  # (first line of the decorator, last line of the function, name, decorator)
+    edits = []  # (first decorator line, last decorator line, last line of the function, binding)
     for node in ast.walk(tree):
-        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and len(node.decorator_list) == 1:
-            dec = ast.get_source_segment(source, node.decorator_list[0])
-            if dec in decorators and node.end_lineno is not None:
-                edits.append((node.decorator_list[0].lineno, node.end_lineno, node.name, dec))
-    for dec_line, end, name, dec in sorted(edits, reverse=True):  # bottom up: numbers stay valid
-        indent = lines[dec_line - 1][: len(lines[dec_line - 1]) - len(lines[dec_line - 1].lstrip())]
-        lines.insert(end, f"{indent}{name} = {dec}({name})\n")
-        del lines[dec_line - 1]
+        if not isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) or not node.decorator_list:
+            continue
+        decs = [ast.get_source_segment(source, d) for d in node.decorator_list]
+        if decs in (["classmethod"], ["staticmethod"]) or not all(d in decorators for d in decs):
+            continue
+        bound = node.name
+        for dec in reversed(decs):
+            bound = f"{dec}({bound})"
+        first, last = node.decorator_list[0].lineno, node.decorator_list[-1].end_lineno
+        if node.end_lineno is not None and last is not None:
+            edits.append((first, last, node.end_lineno, f"{node.name} = {bound}"))
+    for first, last, end, binding in sorted(edits, reverse=True):  # bottom up: lines stay valid
+        indent = lines[first - 1][: len(lines[first - 1]) - len(lines[first - 1].lstrip())]
+        lines.insert(end, f"{indent}{binding}\n")
+        del lines[first - 1 : last]
     return "".join(lines)
 
 
