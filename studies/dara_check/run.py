@@ -24,6 +24,8 @@ T, GOAL, LIMIT = 20, 6.0, 10.0
 EVAL_EPISODES = 20
 EPISODES = {"original": 25, "boost": 100}
 """Episodes of each dynamics in the data: scarce target (original), plentiful source (boost)."""
+EXPLORATORY_ETA = {"maple_dara_eta1": 1.0}
+"""Arms added after the rule's runs (README: exploratory, outside the rule): DARA with η 1."""
 
 
 class SlipEnv(gym.Env):
@@ -160,8 +162,9 @@ def config(method: str, seed: int, parts: list[str], cache: Path):
         .training(train_batch_size_per_learner=64)
         .debugging(seed=seed, log_level="ERROR")
     )
-    if method == "maple_dara":
-        cfg = with_dara(cfg, target_dynamics="original", cache=str(cache / "dara"))
+    if method.startswith("maple_dara"):
+        eta = EXPLORATORY_ETA.get(method, 0.1)
+        cfg = with_dara(cfg, eta=eta, target_dynamics="original", cache=str(cache / "dara"))
     return cfg
 
 
