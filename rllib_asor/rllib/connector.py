@@ -42,7 +42,7 @@ from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 
 from rllib_asor.asor.config import AsorConfig
-from rllib_asor.asor.encoding import flatten, select, select_space
+from rllib_asor.asor.networks import flatten, select, select_space
 from rllib_asor.asor.proxy import ProxyInputs
 from rllib_asor.asor.update import (
     AsorBatch,

@@ -23,7 +23,7 @@ from ray.rllib.core.rl_module.torch import TorchRLModule
 from rllib_asor.algorithms.common.asor_adapter import DYNAMICS_ID
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.discriminator import Discriminator, discriminator_loss
-from rllib_asor.asor.encoding import flat_dim, select_space
+from rllib_asor.asor.networks import flat_dim, select_space
 from rllib_asor.asor.proxy import ProxyInputs, make_proxy
 from rllib_asor.asor.update import AsorState
 

@@ -22,7 +22,7 @@ import torch
 from rllib_asor.asor.archive import StateArchive
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.discriminator import Discriminator, discriminator_loss
-from rllib_asor.asor.encoding import flatten
+from rllib_asor.asor.networks import flatten
 from rllib_asor.asor.partition import partition
 from rllib_asor.asor.proxy import make_proxy
 from rllib_asor.asor.reward import explained_variance

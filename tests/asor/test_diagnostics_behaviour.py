@@ -23,8 +23,7 @@ import pytest
 import torch
 
 from rllib_asor.asor import update
-from rllib_asor.asor.encoding import flatten
-from rllib_asor.asor.networks import RunningMeanStd
+from rllib_asor.asor.networks import RunningMeanStd, flatten
 from rllib_asor.asor.partition import _top_k
 from rllib_asor.asor.proxy import ProxyInputs
 from rllib_asor.asor.reward import explained_variance, reward_bonus, scheduled_lambda

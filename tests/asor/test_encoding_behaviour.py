@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from rllib_asor.asor.encoding import flat_dim, flatten, select, select_space
+from rllib_asor.asor.networks import flat_dim, flatten, select, select_space
 from rllib_asor.asor.proxy import ProxyInputs
 from rllib_asor.asor.update import AsorBatch, Chunk, concat_batches
 
