@@ -183,6 +183,55 @@ def test_arm_differences_names_what_else_changed():
     assert arm_differences(base, more) == ["learner_config_dict"]
 
 
+def test_arm_differences_names_each_kind_of_setting_beyond_asor():
+    from ray.rllib.callbacks.callbacks import RLlibCallback
+
+    class UserCallback(RLlibCallback):
+        pass
+
+    base = ARMS["PPO"]()
+    assert arm_differences(base, with_asor(base)) == []
+    assert arm_differences(base, with_asor(base).learners(learner_class=LeanPPOTorchLearner)) == [
+        "learner_class"
+    ]
+    assert arm_differences(base, with_asor(base).callbacks(UserCallback)) == ["callbacks"]
+    assert arm_differences(base, with_asor(base).multi_agent(policies_to_train=["x"])) == [
+        "policies_to_train"
+    ]
+    # the user's own learner_config_dict, callbacks and policies_to_train kept by with_asor
+    own = (
+        base.copy()
+        .learners(learner_config_dict={"x": 1})
+        .callbacks(UserCallback)
+        .multi_agent(policies_to_train=[DEFAULT_MODULE_ID])
+    )
+    assert arm_differences(own, with_asor(own)) == []
+    assert arm_differences(own, with_asor(base)) == [
+        "learner_config_dict",
+        "callbacks",
+        "policies_to_train",
+    ]
+    # settings only one config class has are named too
+    assert "twin_q" in arm_differences(base, with_asor(ARMS["SAC"]()))
+    # values == cannot compare (arrays) are compared by what they print
+    arrays = base.copy().environment(env_config={"a": np.arange(3)})
+    assert arm_differences(arrays, with_asor(arrays)) == []
+    other = with_asor(base.copy().environment(env_config={"a": np.arange(4)}))
+    assert arm_differences(arrays, other) == ["env_config"]
+    # multi-agent: each policy's module spec, a policy more is a spec more
+    def mapping(agent_id, *args, **kwargs):
+        return agent_id
+
+    two = base.copy().multi_agent(policies={"p0", "p1"}, policy_mapping_fn=mapping)
+    three = base.copy().multi_agent(policies={"p0", "p1", "p2"}, policy_mapping_fn=mapping)
+    assert arm_differences(two, with_asor(two)) == []
+    assert arm_differences(two, with_asor(three)) == ["policies", "rl_module_spec"]
+    # a policy spec that only names the default module class is the default
+    default = base.get_default_rl_module_spec().module_class
+    named = base.copy().rl_module(rl_module_spec=RLModuleSpec(module_class=default))
+    assert arm_differences(base, with_asor(named)) == []
+
+
 def test_the_asor_learner_subclasses_the_users_learner_or_refuses():
     assert asor_learner_class(PPOConfig()) is AsorPPOTorchLearner
     lean = asor_learner_class(PPOConfig().learners(learner_class=LeanPPOTorchLearner))
