@@ -1,0 +1,207 @@
+"""The glue's small promises that the Learner-level tests rarely reach (each written for a
+mutant of the glue that survived them; docs/testing.md, "Mutation testing").
+
+The metrics callbacks keep only finite numbers and drop NaN at every depth under `learners`;
+a Tune run name maps to the supported algorithm it derives from; the reward rows keep their
+dtype and device, and so does the bonus of an adapter's bonus rows; an episode id keeps its
+own "_" (only RLlib's "_<i>" suffix is stripped); the many-Learner path moves every tensor
+of an `AsorBatch` to the Learner's device; the proxy module is seeded for every proxy kind.
+
+CI has no GPU: a factory call that ignores the data's device is caught by running the code
+with torch's default device set to "meta" (as tests/asor/test_device_behaviour.py does), a
+dtype that ignores the data's by data in another dtype than torch's default.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+import torch.distributed as dist
+from ray.rllib.core import DEFAULT_MODULE_ID, Columns
+
+from rllib_asor.asor.config import AsorConfig
+from rllib_asor.asor.proxy import ProxyInputs
+from rllib_asor.asor.update import AsorBatch, AsorState
+from rllib_asor.rllib import connector
+from rllib_asor.rllib.callbacks import (
+    AsorMetricsCallback,
+    DropNaNLearnerStatsCallback,
+    drop_nan_learner_stats,
+    lift_asor_metrics,
+)
+from rllib_asor.rllib.connector import AsorRewardConnector
+from rllib_asor.rllib.modules import AsorProxyModule
+from rllib_asor.rllib.wiring import supported_run
+from tests.rllib.test_glue_behaviour import episodes
+
+NAN, INF = float("nan"), float("inf")
+DISC = "asor_disc." + DEFAULT_MODULE_ID
+
+
+def piece(**asor) -> AsorRewardConnector:
+    """The ASOR piece on its own (no Learner): enough for its row helpers."""
+    return AsorRewardConnector(asor=AsorConfig(**asor), aux_ids={}, adapter=None, gamma=0.9)
+
+
+# ------------------------------------------------------------------ metrics callbacks
+def test_lifted_metrics_are_finite_numbers_only():
+    stats = {"disc_loss": NAN, "lambda": INF, "bonus_mean": -INF, "js_estimate": "n/a",
+             "disc_acc_real": 0.5, "real_fraction": 1}  # fmt: skip
+    assert lift_asor_metrics({"learners": {DISC: stats}}) == {
+        "disc_acc_real": 0.5,
+        "real_fraction": 1.0,
+    }
+
+
+def test_nan_learner_stats_are_dropped_at_every_depth_and_only_under_learners():
+    def result():
+        return {
+            "learners": {
+                "p": {"num_trainable_parameters": NAN, "loss": 0.5, "deep": {"x": NAN, "y": 1.0}},
+                "__all_modules__": {"inf_stays": INF},
+            },
+            "env_runners": {"episode_return_mean": NAN},
+        }
+
+    kept = {"p": {"loss": 0.5, "deep": {"y": 1.0}}, "__all_modules__": {"inf_stays": INF}}
+    r = result()
+    drop_nan_learner_stats(r)
+    assert r["learners"] == kept and math.isnan(r["env_runners"]["episode_return_mean"])
+    for callback in (DropNaNLearnerStatsCallback(), AsorMetricsCallback()):
+        r = result()
+        callback.on_train_result(result=r)
+        assert r["learners"] == kept
+    drop_nan_learner_stats({"learners": None})  # nothing to prune: no error
+    drop_nan_learner_stats({})
+
+
+# ------------------------------------------------------------------ run names
+def test_a_run_name_maps_to_the_supported_algorithm_it_derives_from():
+    assert supported_run("PPO") == "PPO"
+    assert supported_run("FastSAC") == "SAC"  # a subclass of RLlib's SAC
+    assert supported_run("MOPO") == "MAPLE"  # a subclass of MAPLE
+    assert supported_run("DQN") is None  # registered, not supported
+    assert supported_run("NoSuchAlgorithm") is None  # unknown
+
+
+# ------------------------------------------------------------------ dtype and device of rows
+def test_the_bonus_keeps_the_rewards_dtype_and_device():
+    rows = torch.tensor([0, 2])
+    delta = torch.tensor([0.25, -0.5])
+    for dtype in (torch.float16, torch.float64):
+        pb = {Columns.REWARDS: torch.ones(2, 2, dtype=dtype, device="cpu")}
+        with torch.device("meta"):
+            piece()._add_to_rewards(pb, rows, delta)
+        got = pb[Columns.REWARDS]
+        assert got.dtype == dtype and got.device.type == "cpu"
+        assert got.tolist() == [[1.25, 1.0], [0.5, 1.0]]
+
+
+def _bonus_rows(dtype: torch.dtype) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(0)
+    obs = torch.randn(2, 3, 4, generator=g, dtype=dtype)
+    return {
+        Columns.OBS: obs,
+        Columns.NEXT_OBS: obs + 0.1,
+        Columns.TERMINATEDS: torch.zeros(2, 3, dtype=torch.bool),
+        "valid": torch.tensor([[True, True, False], [True, False, False]]),
+    }
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_the_bonus_of_bonus_rows_keeps_the_bonus_dtype_and_device(dtype):
+    cfg = AsorConfig(seed=0, disc_hiddens=[8], bonus_norm="off", shaping="potential")
+    state = AsorState(cfg, 4).to(dtype)
+    rows = _bonus_rows(dtype)
+    expected = connector.bonus_on_rows(cfg, state, 0.5, rows, 0.9)
+    other = torch.float64 if dtype == torch.float32 else torch.float32
+    old = torch.get_default_dtype()
+    torch.set_default_dtype(other)
+    try:
+        with torch.device("meta"):
+            got = connector.bonus_on_rows(cfg, state, 0.5, rows, 0.9)
+    finally:
+        torch.set_default_dtype(old)
+    assert got.dtype == expected.dtype == dtype and got.device.type == "cpu"
+    assert got.shape == (2, 3) and torch.equal(got, expected)
+    assert (got[~rows["valid"]] == 0).all() and (got[rows["valid"]] != 0).all()
+
+
+# ------------------------------------------------------------------ episode chunks
+def test_an_episode_id_keeps_its_own_underscores():
+    """Only RLlib's "_<i>" suffix of the Learner's copy is stripped: ids that contain "_"
+    (an offline data set's, a user's) keep the rest, so two episodes never share a key."""
+    eps = episodes(0, n=3, length=4)
+    eps[0].id_, eps[1].id_, eps[2].id_ = "run_a_b_3", "run_a_c_3", "run_a_c"
+    valid = torch.tensor(([True] * 3 + [False]) * 3)
+    chunks = piece()._chunks(eps, DEFAULT_MODULE_ID, valid)
+    assert [c.key[0] for c in chunks] == ["run_a_b", "run_a_c", "run_a"]
+
+
+# ------------------------------------------------------------------ several Learners
+def _asor_batch() -> AsorBatch:
+    x = torch.arange(12.0).reshape(4, 3)
+    return AsorBatch(
+        features=x,
+        env_rewards=torch.arange(4.0),
+        values=torch.ones(4),
+        gamma=0.9,
+        timestep=3.0,
+        proxy_inputs=ProxyInputs(x, torch.ones(4, 2), x + 1, torch.arange(4)),
+        terminateds=torch.zeros(4, dtype=torch.bool),
+        next_features=x + 1,
+        next_values=torch.zeros(4),
+    )
+
+
+def _tensors(value) -> list[torch.Tensor]:
+    if isinstance(value, torch.Tensor):
+        return [value]
+    if isinstance(value, AsorBatch | ProxyInputs):
+        return [t for v in vars(value).values() for t in _tensors(v)]
+    return []
+
+
+def test_moved_puts_every_tensor_of_the_batch_and_its_proxy_inputs_on_the_device():
+    batch = _asor_batch()
+    moved = connector._moved(batch, "meta")
+    assert len(_tensors(moved)) == len(_tensors(batch)) == 10
+    assert all(t.device.type == "meta" for t in _tensors(moved))
+    assert moved.gamma == 0.9 and moved.timestep == 3.0
+    assert all(t.device.type == "cpu" for t in _tensors(batch))  # the original is left alone
+    assert connector._moved(None, "meta") is None
+
+
+def test_gathered_batches_land_on_the_learners_device(tmp_path):
+    os.environ.setdefault("MASTER_ADDR", "127.0.0.1")
+    dist.init_process_group("gloo", init_method=f"file://{tmp_path / 'store'}", rank=0, world_size=1)
+    try:
+        (got,) = connector.gather_batches(_asor_batch(), "meta")
+        assert connector.gather_batches(None, "meta") == [None]
+    finally:
+        dist.destroy_process_group()
+    assert len(_tensors(got)) == 10 and all(t.device.type == "meta" for t in _tensors(got))
+
+
+# ------------------------------------------------------------------ the proxy module's seed
+@pytest.mark.parametrize("proxy", ["rnd", "rnd_per_dynamics", "ensemble"])
+def test_every_proxy_kind_is_seeded_and_leaves_the_global_rng_alone(proxy):
+    obs, act = gym.spaces.Box(-1, 1, (4,), np.float32), gym.spaces.Discrete(3)
+    cfg = {"asor": AsorConfig(seed=7, proxy=proxy, rnd_hiddens=[8]).to_dict()}
+
+    def build():
+        return AsorProxyModule(observation_space=obs, action_space=act, model_config=cfg)
+
+    torch.manual_seed(5)
+    expected_next = torch.rand(1)
+    torch.manual_seed(5)
+    a = build()
+    assert torch.rand(1).item() == expected_next.item()
+    b = build()  # from another point of the global stream: the same weights
+    for pa, pb in zip(a.parameters(), b.parameters(), strict=True):
+        assert torch.equal(pa, pb)
