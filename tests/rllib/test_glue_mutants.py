@@ -14,6 +14,7 @@ dtype that ignores the data's by data in another dtype than torch's default.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 
@@ -23,6 +24,8 @@ import pytest
 import torch
 import torch.distributed as dist
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
+from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
+from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.proxy import ProxyInputs
@@ -35,6 +38,7 @@ from rllib_asor.rllib.callbacks import (
     lift_asor_metrics,
 )
 from rllib_asor.rllib.connector import AsorRewardConnector
+from rllib_asor.rllib.learners import AsorPPOTorchLearner
 from rllib_asor.rllib.modules import AsorProxyModule
 from rllib_asor.rllib.wiring import supported_run
 from tests.rllib.test_glue_behaviour import episodes
@@ -179,13 +183,41 @@ def test_moved_puts_every_tensor_of_the_batch_and_its_proxy_inputs_on_the_device
 
 def test_gathered_batches_land_on_the_learners_device(tmp_path):
     os.environ.setdefault("MASTER_ADDR", "127.0.0.1")
-    dist.init_process_group("gloo", init_method=f"file://{tmp_path / 'store'}", rank=0, world_size=1)
+    dist.init_process_group(
+        "gloo", init_method=f"file://{tmp_path / 'store'}", rank=0, world_size=1
+    )
     try:
         (got,) = connector.gather_batches(_asor_batch(), "meta")
         assert connector.gather_batches(None, "meta") == [None]
     finally:
         dist.destroy_process_group()
     assert len(_tensors(got)) == 10 and all(t.device.type == "meta" for t in _tensors(got))
+
+
+# ------------------------------------------------------------------ the aux modules' passes
+def test_an_aux_module_that_left_is_not_waited_for_without_a_fixed_minibatch_count():
+    """RLlib's iterator without a fixed minibatch count runs until every module it tracks has
+    covered its epochs; an aux module that trained its `aux_rows` leaves and is no longer
+    tracked, so the iteration ends with the policy's epoch."""
+    lrn = object.__new__(AsorPPOTorchLearner)  # its iterator methods need only these three
+    lrn.asor, lrn._asor_aux_sizes, lrn._asor_rows_trained = (
+        AsorConfig(aux_epochs=0.5),
+        {DISC: 90},
+        {},
+    )
+    rows = {DEFAULT_MODULE_ID: 30, DISC: 90}
+    batch = MultiAgentBatch(
+        {m: SampleBatch({Columns.OBS: torch.zeros(n, 3)}) for m, n in rows.items()}, 30
+    )
+    it = MiniBatchCyclicIterator(
+        batch, num_epochs=1, minibatch_size=30, shuffle_batch_per_epoch=False
+    )
+    trained = []
+    for minibatch in itertools.islice(lrn._without_finished_aux(it), 10):
+        kept = lrn._cap_aux_passes(dict(minibatch.policy_batches))  # what `_update` does
+        trained.append(sorted(kept))
+    assert trained == [sorted(rows)] * 2  # 60 of the disc's 90 rows ≥ aux_rows = 45
+    assert lrn._asor_rows_trained == {DISC: 60}
 
 
 # ------------------------------------------------------------------ the proxy module's seed
