@@ -2,7 +2,8 @@
 
 OMP_NUM_THREADS=1 nice .venv/bin/python studies/dara_check/run.py [--iters N] [--seeds 0 1 2]
 
-Each finished run is saved to results.json at once; a rerun skips it. The stand-in datasets
+Each finished run is saved to runs/<method>-seed<k>.json at once; a rerun skips it
+(summarise.py: the table and the rule's verdicts). The stand-in datasets
 are written under data/ beside this file (`make_data`, seed fixed, the same for every run).
 """
 
@@ -18,6 +19,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 DATA = HERE / "data"
+RUNS = HERE / "runs"
 ENV_ID = "dara_check/Slip-v0"
 METHODS = ("maple", "maple_dara")
 T, GOAL, LIMIT = 20, 6.0, 10.0
@@ -195,7 +197,7 @@ def run(method: str, seed: int, iters: int, parts: list[str]) -> dict:
     if method in reference_policies():
         return {"score": score(reference_policies()[method], seed), "seconds": 0.0}
     t0 = time.perf_counter()
-    algo = config(method, seed, parts, HERE / "cache").build_algo()
+    algo = config(method, seed, parts, DATA / "cache").build_algo()
     try:
         for _ in range(iters):
             result = algo.train()
@@ -205,12 +207,6 @@ def run(method: str, seed: int, iters: int, parts: list[str]) -> dict:
     finally:
         algo.stop()
     return {**out, "seconds": time.perf_counter() - t0}
-
-
-def normalised(results: dict, key: str, seed: int) -> float:
-    """100·(R − R_random)/(R_optimal − R_random) on the same evaluation starts."""
-    lo, hi = results[f"random/seed{seed}"]["score"], results[f"optimal/seed{seed}"]["score"]
-    return 100 * (results[key]["score"] - lo) / (hi - lo)
 
 
 def main() -> None:
@@ -226,22 +222,19 @@ def main() -> None:
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     register()
     parts = make_data()
-    out = HERE / "results.json"
-    results = json.loads(out.read_text()) if out.is_file() else {}
+    RUNS.mkdir(exist_ok=True)
     for seed in args.seeds:
         for method in args.methods:
-            key = f"{method}/seed{seed}"
-            if key in results:
+            path = RUNS / f"{method}-seed{seed}.json"
+            if path.is_file():
                 continue
-            results[key] = {"iters": args.iters, **run(method, seed, args.iters, parts)}
-            print(key, json.dumps(results[key]), flush=True)
-            out.write_text(json.dumps(results, indent=1, sort_keys=True) + "\n")
-    for method in args.methods:
-        keys = [f"{method}/seed{s}" for s in args.seeds if f"{method}/seed{s}" in results]
-        norm = [normalised(results, k, int(k.rsplit("seed", 1)[1])) for k in keys]
-        print(
-            f"{method:11s} normalised mean {np.mean(norm):7.1f}  seeds {np.round(norm, 1).tolist()}"
-        )
+            result = {"method": method, "seed": seed, "iters": args.iters}
+            result.update(run(method, seed, args.iters, parts))
+            path.write_text(json.dumps(result, indent=1, sort_keys=True) + "\n")
+            print(path.name, json.dumps(result), flush=True)
+    from summarise import summarise, table
+
+    print(table(summarise(RUNS)))
 
 
 if __name__ == "__main__":

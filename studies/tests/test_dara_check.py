@@ -1,5 +1,6 @@
 """studies/dara_check: the task is what its README says (the dynamics differ only above
-a = 0.5, the target slips back, the source jumps) and the normalised score is the rule's."""
+a = 0.5, the target slips back, the source jumps), and the normalised score and the verdict
+on DARA against MAPLE are the rule's."""
 
 from __future__ import annotations
 
@@ -32,10 +33,13 @@ def test_the_dynamics_agree_up_to_half_and_differ_above(run):
         run.SlipEnv("wind")
 
 
-def test_the_best_target_policy_beats_random_and_scores_100(run):
+def test_the_best_target_policy_beats_random_and_the_rules_verdicts():
+    run, summary = study_script("dara_check", "run"), study_script("dara_check", "summarise")
     best, rand = (run.score(run.reference_policies()[k], 0) for k in ("optimal", "random"))
     assert best > rand + 20
-    results = {"random/seed0": {"score": rand}, "optimal/seed0": {"score": best},
-               "m/seed0": {"score": (best + rand) / 2}}  # fmt: skip
-    assert run.normalised(results, "optimal/seed0", 0) == pytest.approx(100)
-    assert run.normalised(results, "m/seed0", 0) == pytest.approx(50)
+    assert summary.normalised(best, rand, best) == pytest.approx(100)
+    assert summary.normalised((best + rand) / 2, rand, best) == pytest.approx(50)
+    assert summary.dara_verdict([12.0, 11.0, 9.0]) == "DARA better"  # mean ≥ 10, all > 0
+    assert summary.dara_verdict([30.0, 30.0, -1.0]) == "no clear difference at this budget"
+    assert summary.dara_verdict([-10.0, -10.0, -10.0]) == "DARA worse"
+    assert summary.dara_verdict([0.0, 0.0, 0.0]) == "no clear difference at this budget"
