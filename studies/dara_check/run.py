@@ -65,11 +65,11 @@ class SlipEnv(gym.Env):
 
 def register() -> None:
     """The env id (its name holds `slip`) and MAPLE's model-rollout rule for it (never ends)."""
-    from rllib_asor.algorithms.maple import termination
+    from rllib_asor.algorithms.maple.termination import register_termination
 
     if ENV_ID not in gym.registry:
         gym.register(ENV_ID, entry_point=SlipEnv)
-    termination.RULES.setdefault("slip", lambda o: ~np.isfinite(o).all(-1))
+    register_termination("slip", lambda o: ~np.isfinite(o).all(-1))
 
 
 def rollout(policy, dynamics: str, episodes: int, seed: int) -> list[tuple]:

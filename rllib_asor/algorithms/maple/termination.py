@@ -56,6 +56,15 @@ RULES: dict[str, TerminationFn] = {
 }
 
 
+def register_termination(key: str, fn: TerminationFn) -> None:
+    """Use `fn` for the model rollouts of env ids containing `key` (case-insensitive): the rule
+    of a user's own env. Registered in the process that builds the algorithm (a Python
+    `config.build_algo()`; under Tune, at import of the module that registers the env)."""
+    if not key:
+        raise ValueError("register_termination: key='' is invalid: allowed a non-empty string")
+    RULES[key.lower()] = fn
+
+
 def termination_fn(env_id: str) -> TerminationFn:
     """The rule for an env id (`rllib_asor/HopperShift-v0`, `Hopper-v5`, ...), matched by name
     as the port's `is_terminal`; ValueError for envs without one."""
@@ -65,5 +74,5 @@ def termination_fn(env_id: str) -> TerminationFn:
             return RULES[key]
     raise ValueError(
         f"env={env_id!r} has no model-rollout termination rule: allowed envs whose id contains "
-        f"{' | '.join(RULES)}"
+        f"{' | '.join(RULES)} (a user's env: register_termination(key, fn) first)"
     )

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from rllib_asor.algorithms.maple import termination
 from rllib_asor.algorithms.maple.ensemble import GaussianEnsemble
 from rllib_asor.algorithms.maple.rollout import (
     ClipRange,
@@ -46,8 +47,18 @@ def test_hopper_termination_rule() -> None:
     assert hopper(np.array([[1.2, 0.0, -150.0]]))[0]  # out of range
     assert hopper(np.array([[np.nan, 0.0, 0.0]]))[0]
     assert termination_fn("rllib_asor/HopperShift-v0") is hopper
-    with pytest.raises(ValueError, match="env='CartPole-v1'.*hopper"):
+    with pytest.raises(ValueError, match="env='CartPole-v1'.*hopper.*register_termination"):
         termination_fn("CartPole-v1")
+
+
+def test_a_users_env_gets_its_registered_termination_rule(monkeypatch) -> None:
+    monkeypatch.setattr(termination, "RULES", dict(termination.RULES))
+    never = lambda o: np.zeros(len(o), bool)  # noqa: E731
+    termination.register_termination("MySlip", never)
+    assert termination_fn("me/MySlipWorld-v0") is never
+    assert termination_fn("rllib_asor/HopperShift-v0") is hopper
+    with pytest.raises(ValueError, match="key='' is invalid"):
+        termination.register_termination("", never)
 
 
 def _hand_made_ensemble(drifts: list[float], log_sigma: float = -12.0) -> GaussianEnsemble:
