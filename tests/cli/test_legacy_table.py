@@ -52,6 +52,22 @@ def test_renamed_config_key_lands_on_a_real_setting(old, new):
     assert getattr(config, new) != getattr(cls(), new)
 
 
+@pytest.mark.parametrize(
+    "run, old, new",
+    sorted((r, o, n) for r, t in legacy.RENAMED_CONFIG_KEYS_BY_RUN.items() for o, n in t.items()),
+)
+def test_a_rename_of_one_run_applies_to_that_run_only(run, old, new):
+    from ray.tune.registry import get_trainable_cls
+
+    cls = get_trainable_cls(run).get_default_config().__class__
+    out, warnings = legacy.translate_config({old: 7}, "f.yaml", run=run)
+    assert out == {new: 7}
+    assert any(f"'{old}'" in w and f"'{new}'" in w for w in warnings), warnings
+    assert getattr(cls().update_from_dict(out), new) == 7
+    other, _ = legacy.translate_config({old: 7}, "f.yaml", run="PPO")
+    assert new not in other
+
+
 @pytest.mark.parametrize("key", legacy.MODEL_CONFIG_TOPLEVEL_KEYS)
 def test_top_level_model_keys_land_in_model_config(key):
     assert key in {f.name for f in dataclasses.fields(DefaultModelConfig)}
