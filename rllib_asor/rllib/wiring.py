@@ -185,7 +185,7 @@ def asor_learner_class(config: AlgorithmConfig, algo: str | None = None) -> type
     raise ValueError(
         f"learner_class={base.__name__} has no ASOR Learner: with_asor would replace it; "
         f"allowed: leave learner_class unset, or a subclass of {default.__name__} "
-        f"(rllib_asor.rllib.wiring) or of {', '.join(c.__name__ for c in SPECIFIC)}"
+        f"(rllib_asor.rllib.learners) or of {', '.join(c.__name__ for c in SPECIFIC)}"
     )
 
 
