@@ -23,10 +23,17 @@ import numpy as np
 import pytest
 import torch
 import torch.distributed as dist
+from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
+from ray.rllib.algorithms.sac import SACConfig
+from ray.rllib.algorithms.sac.torch.sac_torch_learner import SACTorchLearner
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
+from rllib_asor import with_asor
+from rllib_asor.algorithms.sac.fast import FLAT_STORAGE, fast_off_policy
+from rllib_asor.algorithms.sac.learner import FastSACTorchLearner
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.proxy import ProxyInputs
 from rllib_asor.asor.update import AsorBatch, AsorState
@@ -38,9 +45,9 @@ from rllib_asor.rllib.callbacks import (
     lift_asor_metrics,
 )
 from rllib_asor.rllib.connector import AsorRewardConnector
-from rllib_asor.rllib.learners import AsorPPOTorchLearner
+from rllib_asor.rllib.learners import AsorPPOTorchLearner, AsorSACTorchLearner
 from rllib_asor.rllib.modules import AsorProxyModule
-from rllib_asor.rllib.wiring import supported_run
+from rllib_asor.rllib.wiring import asor_learner_class, supported_run
 from tests.rllib.test_glue_behaviour import episodes
 
 NAN, INF = float("nan"), float("inf")
@@ -91,6 +98,39 @@ def test_a_run_name_maps_to_the_supported_algorithm_it_derives_from():
     assert supported_run("MOPO") == "MAPLE"  # a subclass of MAPLE
     assert supported_run("DQN") is None  # registered, not supported
     assert supported_run("NoSuchAlgorithm") is None  # unknown
+
+
+# ------------------------------------------------------------------ the Learner and the replay
+def test_a_users_learner_that_adds_nothing_gets_the_algorithms_asor_learner():
+    class MyPPO(PPOTorchLearner):
+        pass
+
+    assert asor_learner_class(PPOConfig().learners(learner_class=MyPPO)) is AsorPPOTorchLearner
+
+    class Extra:  # a base ASOR's Learner does not have: ASOR would drop it
+        def hook(self) -> None: ...
+
+    class Mixed(Extra, PPOTorchLearner):
+        pass
+
+    with pytest.raises(ValueError, match="learner_class=Mixed has no ASOR Learner"):
+        asor_learner_class(PPOConfig().learners(learner_class=Mixed))
+
+
+def test_per_dynamics_rnd_is_refused_on_the_flat_storage_whatever_the_learner():
+    episodic = {"type": "EpisodeReplayBuffer"}
+    flat = fast_off_policy(
+        SACConfig().learners(learner_class=SACTorchLearner).training(replay_buffer_config=episodic)
+    )
+    assert flat.replay_buffer_config["storage"] == FLAT_STORAGE
+    with pytest.raises(ValueError, match="proxy='rnd_per_dynamics' needs each step's dynamics"):
+        with_asor(flat, proxy="rnd_per_dynamics")
+    # RLlib's own replay keeps each step's infos, whatever its type or the Learner
+    plain = with_asor(SACConfig().training(replay_buffer_config=episodic), proxy="rnd_per_dynamics")
+    assert plain.learner_class is AsorSACTorchLearner
+    fast_learner = SACConfig().learners(learner_class=FastSACTorchLearner)  # prioritized replay
+    with_asor(fast_learner, proxy="rnd_per_dynamics")
+    with_asor(PPOConfig(), proxy="rnd_per_dynamics")  # on-policy: no replay buffer at all
 
 
 # ------------------------------------------------------------------ dtype and device of rows
