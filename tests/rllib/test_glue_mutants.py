@@ -48,10 +48,10 @@ from rllib_asor.rllib.connector import AsorRewardConnector
 from rllib_asor.rllib.learners import AsorPPOTorchLearner, AsorSACTorchLearner
 from rllib_asor.rllib.modules import AsorProxyModule
 from rllib_asor.rllib.wiring import asor_learner_class, supported_run
-from tests.rllib.test_glue_behaviour import episodes
+from tests.rllib.test_glue_behaviour import episodes, learner
 
 NAN, INF = float("nan"), float("inf")
-DISC = "asor_disc." + DEFAULT_MODULE_ID
+DISC, PROXY = "asor_disc." + DEFAULT_MODULE_ID, "asor_proxy." + DEFAULT_MODULE_ID
 
 
 def piece(**asor) -> AsorRewardConnector:
@@ -131,6 +131,19 @@ def test_per_dynamics_rnd_is_refused_on_the_flat_storage_whatever_the_learner():
     fast_learner = SACConfig().learners(learner_class=FastSACTorchLearner)  # prioritized replay
     with_asor(fast_learner, proxy="rnd_per_dynamics")
     with_asor(PPOConfig(), proxy="rnd_per_dynamics")  # on-policy: no replay buffer at all
+
+
+def test_the_aux_optimizers_take_the_settings_learning_rates_and_weight_decay():
+    lrn = learner(disc_lr=2e-3, rnd_lr=5e-3, disc_weight_decay=0.01)
+    disc, proxy = lrn.get_optimizer(DISC), lrn.get_optimizer(PROXY)
+    assert lrn._get_optimizer_lr(disc) == pytest.approx(2e-3)
+    assert lrn._get_optimizer_lr(proxy) == pytest.approx(5e-3)
+    assert disc.param_groups[0]["weight_decay"] == 0.01
+    assert proxy.param_groups[0]["weight_decay"] == 0.0
+    # the proxy's optimizer holds exactly its trainable parameters (not the frozen RND target)
+    trainable = {id(p) for p in lrn.module[PROXY].parameters() if p.requires_grad}
+    assert {id(p) for g in proxy.param_groups for p in g["params"]} == trainable
+    assert len(trainable) < len(list(lrn.module[PROXY].parameters()))
 
 
 # ------------------------------------------------------------------ dtype and device of rows
