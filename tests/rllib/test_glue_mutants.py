@@ -146,6 +146,22 @@ def test_the_aux_optimizers_take_the_settings_learning_rates_and_weight_decay():
     assert len(trainable) < len(list(lrn.module[PROXY].parameters()))
 
 
+def test_maples_bonus_rows_get_the_configs_gamma(monkeypatch):
+    from tests.rllib.test_soft_q_glue import maple_batch, maple_learner
+
+    gammas = []
+    real = connector.bonus_on_rows
+
+    def spy(cfg, state, lam, rows, gamma):
+        gammas.append(gamma)
+        return real(cfg, state, lam, rows, gamma)
+
+    monkeypatch.setattr(connector, "bonus_on_rows", spy)
+    lrn = maple_learner(shaping="potential", lambda_=0.1)
+    lrn.update(batch=maple_batch(lrn)[1], timesteps={"maple_gradient_steps": 0})
+    assert gammas == [lrn.config.gamma]
+
+
 # ------------------------------------------------------------------ dtype and device of rows
 def test_the_bonus_keeps_the_rewards_dtype_and_device():
     rows = torch.tensor([0, 2])

@@ -190,7 +190,9 @@ def _maple_pieces_of_rank(rank: int) -> dict:
     from tests.rllib.test_soft_q_glue import maple_batch, maple_learner
 
     lrn = maple_learner(preset="paper", lambda_=0.1)
-    return _maple_pieces(lrn, maple_batch(lrn, seed=rank)[1])
+    pieces = _maple_pieces(lrn, maple_batch(lrn, seed=rank)[1])
+    lrn.update(batch=maple_batch(lrn, seed=rank + 2)[1], timesteps={"maple_gradient_steps": 1})
+    return pieces | {"rows_ranked": torch.tensor(lrn._asor_piece.rows_ranked)}
 
 
 def test_two_maple_learners_rank_all_real_states_and_keep_their_own_bonus(two_ranks):
@@ -211,3 +213,6 @@ def test_two_maple_learners_rank_all_real_states_and_keep_their_own_bonus(two_ra
     for key in ("disc_obs", "proxy_obs"):
         for r in range(2):
             torch.testing.assert_close(ranks[r][key], even_share(whole[key], r, 2))
+    # offline λ's timestep: each Learner counts the real rows of all Learners, call after call
+    assert one._asor_piece.rows_ranked == 48
+    assert [int(r["rows_ranked"]) for r in ranks] == [2 * 48, 2 * 48]
