@@ -19,7 +19,6 @@ from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 from ray.rllib.core.models.base import ENCODER_OUT
 
 import rllib_asor
-from rllib_asor.algorithms.escp.module import escp_state_values
 from rllib_asor.algorithms.sac.asor_adapter import soft_q_state_values
 from rllib_asor.algorithms.sac.fast import fast_off_policy
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY, FlatTransitions
@@ -207,8 +206,9 @@ def test_potential_shaping_uses_the_configs_gamma_and_the_critics_values(algo, m
     monkeypatch.setattr(connector_module, "asor_update", update_spy)
     tensors = {k: torch.from_numpy(v) for k, v in cols.items()}
     with torch.no_grad():
-        value_fn = soft_q_state_values if algo == "sac" else escp_state_values
-        expected_values = value_fn(module, tensors)
+        expected_values = (
+            soft_q_state_values(module, tensors) if algo == "sac" else module.state_values(tensors)
+        )
     update(learner, cols)
     env_reward = {
         tuple(o): r for o, r in zip(cols[Columns.OBS], cols[Columns.REWARDS], strict=True)

@@ -278,18 +278,6 @@ class EscpTorchRLModule(
         return self._q(obs, action, z_q)
 
 
-def escp_state_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
-    """ASOR's `value_fn` for ESCP modules (rllib_asor.rllib.connector): `state_values` with
-    the module's `value_context` (default "window")."""
-    return module.state_values(batch)
-
-
-def escp_task_mean_state_values(module: Any, batch: dict[str, Any]) -> torch.Tensor:
-    """V(s) with z̄_task for π as well as for the critics: no encoder pass for rows of tasks
-    with a moving average (a different ranking input from `escp_state_values`)."""
-    return module.state_values(batch, context="task_mean")
-
-
 def _window(batch: dict[str, Any], key: str) -> torch.Tensor:
     window = batch.get(key)
     if window is None:
