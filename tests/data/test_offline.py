@@ -11,6 +11,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 import torch
+from ray.rllib.algorithms.cql import CQLConfig
 from ray.rllib.env.single_agent_episode import SingleAgentEpisode
 
 import rllib_asor
@@ -135,16 +136,12 @@ def _policy_state(learner) -> dict[str, np.ndarray]:
     return {k: v.detach().cpu().numpy() for k, v in state.items()}
 
 
-def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dataset, tmp_path):
-    from ray.rllib.algorithms.algorithm import Algorithm
-    from ray.rllib.algorithms.cql import CQLConfig
-
-    from tests.cluster.test_many_learners import _asor_state, _assert_same
-
+def tiny_cql(data: Path, num_learners: int = 0, **input_kwargs) -> CQLConfig:
+    """A small local CQL config reading our dataset at `data` (`offline_input`'s keywords)."""
     config = (
         CQLConfig()
         .env_runners(num_env_runners=0)
-        .learners(num_learners=0)
+        .learners(num_learners=num_learners)
         .training(train_batch_size_per_learner=64, bc_iters=0, lr=None)
         .reporting(min_time_s_per_iteration=0, min_train_timesteps_per_iteration=0)
     )
@@ -152,10 +149,22 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
     # One OfflinePreLearner actor instead of Ray Data's default two: one process less to start.
     offline_input(
         config,
-        dataset,
+        data,
         dataset_num_iters_per_learner=2,
         map_batches_kwargs={"concurrency": 1, "num_cpus": 0.5},
+        **input_kwargs,
     )
+    if num_learners:
+        config.learners(num_cpus_per_learner=0.5)
+    return config
+
+
+def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dataset, tmp_path):
+    from ray.rllib.algorithms.algorithm import Algorithm
+
+    from tests.cluster.test_many_learners import _asor_state, _assert_same
+
+    config = tiny_cql(dataset)
     # A λ schedule over dataset rows trained: 0 for the first minibatch (row 0), 0.1 from row 64.
     algo = rllib_asor.with_asor(
         config, preset="paper", lambda_=[[0, 0.0], [64, 0.1]], seed=0
@@ -220,23 +229,9 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
 
 
 def test_cql_asor_trains_on_two_learners_with_one_state(dataset, tmp_path):
-    from ray.rllib.algorithms.cql import CQLConfig
-
     from tests.cluster.test_many_learners import _assert_same, _per_rank
 
-    config = (
-        CQLConfig()
-        .env_runners(num_env_runners=0)
-        .learners(num_learners=2, num_cpus_per_learner=0.5)
-        .training(train_batch_size_per_learner=64, bc_iters=0, lr=None)
-        .reporting(min_time_s_per_iteration=0, min_train_timesteps_per_iteration=0)
-    )
-    offline_input(
-        config,
-        dataset,
-        dataset_num_iters_per_learner=2,
-        map_batches_kwargs={"concurrency": 1, "num_cpus": 0.5},
-    )
+    config = tiny_cql(dataset, num_learners=2)
     algo = rllib_asor.with_asor(config, seed=0).build_algo()
     try:
         for _ in range(2):

@@ -207,24 +207,9 @@ def test_maple_dara_trains_from_python_and_its_checkpoint_round_trips(parts, tmp
 
 
 def test_cql_dara_reads_the_relabelled_copies_and_trains(parts, hopper_offline_data, tmp_path):
-    from ray.rllib.algorithms.cql import CQLConfig
+    from tests.data.test_offline import tiny_cql
 
-    from rllib_asor.algorithms.cql.offline import offline_input
-
-    config = (
-        CQLConfig()
-        .env_runners(num_env_runners=0)
-        .learners(num_learners=0)
-        .training(train_batch_size_per_learner=64, bc_iters=0, lr=None)
-        .reporting(min_time_s_per_iteration=0, min_train_timesteps_per_iteration=0)
-    )
-    offline_input(
-        config,
-        hopper_offline_data,
-        quality="random",
-        dataset_num_iters_per_learner=2,
-        map_batches_kwargs={"concurrency": 1, "num_cpus": 0.5},
-    )
+    config = tiny_cql(hopper_offline_data, quality="random")
     dara = with_dara(config, **FAST, eta=1.0, cache=str(tmp_path))
     expected, _ = dara_parts(config.input_, {**FAST, "eta": 1.0, "cache": str(tmp_path)}, seed=0)
     assert dara.input_ == expected and config.input_ != expected
