@@ -66,6 +66,10 @@ def _sac() -> Any:
             train_batch_size_per_learner=32,
             replay_buffer_config={"type": "EpisodeReplayBuffer", "capacity": 10_000},
         )
+        # 16 env steps per update and 80 per iteration: 5 two-Learner updates an iteration (by
+        # default one step per update and 100 steps per iteration, and the test took 70 s).
+        .env_runners(rollout_fragment_length=16)
+        .reporting(min_sample_timesteps_per_iteration=80, min_time_s_per_iteration=0)
         .rl_module(model_config={"fcnet_hiddens": [32]})
         .debugging(seed=0)
     )
