@@ -26,8 +26,16 @@ T, GOAL, LIMIT = 20, 6.0, 10.0
 EVAL_EPISODES = 20
 EPISODES = {"original": 25, "boost": 100}
 """Episodes of each dynamics in the data: scarce target (original), plentiful source (boost)."""
-EXPLORATORY_ETA = {"maple_dara_eta1": 1.0}
-"""Arms added after the rule's runs (README: exploratory, outside the rule): DARA with η 1."""
+DARA_ARMS = {
+    "maple_dara": {"eta": 0.1},
+    "maple_dara_eta1": {"eta": 1.0},
+    "maple_dara_eta3": {"eta": 3.0},
+    "maple_dara_noise01": {"eta": 0.1, "input_noise": 0.1},
+    "maple_dara_eta1_noise01": {"eta": 1.0, "input_noise": 0.1},
+}
+"""DARA's settings per arm (README): `maple_dara` (shipped η 0.1, classifier input noise σ 1) is
+the first rule's; the next three are exploratory; `maple_dara_eta1_noise01` is the
+confirmatory rule's."""
 
 
 class SlipEnv(gym.Env):
@@ -101,9 +109,11 @@ def behaviour(seed: int):
 
 
 def reference_policies() -> dict:
-    """Uniform random, and the target's best (a = 0.5 towards the goal, then hold)."""
+    """Uniform random, never moving (a = 0), and the target's best (a = 0.5 towards the goal,
+    then hold)."""
     return {
         "random": lambda obs, rng: rng.uniform(-1, 1),
+        "still": lambda obs, rng: 0.0,
         "optimal": lambda obs, rng: float(np.clip(GOAL - obs[0], -1, 0.5)),
     }
 
@@ -141,7 +151,7 @@ def make_data() -> list[str]:
 
 def config(method: str, seed: int, parts: list[str], cache: Path):
     """MAPLE (the paper's settings, the TF MAPLE's smaller ensemble, this check's budget),
-    with DARA's shipped defaults for `maple_dara`."""
+    with DARA's settings of the arm (DARA_ARMS) for `maple_dara*`."""
     import rllib_asor
     from rllib_asor.algorithms.dara.wiring import with_dara
 
@@ -165,8 +175,8 @@ def config(method: str, seed: int, parts: list[str], cache: Path):
         .debugging(seed=seed, log_level="ERROR")
     )
     if method.startswith("maple_dara"):
-        eta = EXPLORATORY_ETA.get(method, 0.1)
-        cfg = with_dara(cfg, eta=eta, target_dynamics="original", cache=str(cache / "dara"))
+        settings = DARA_ARMS[method]
+        cfg = with_dara(cfg, target_dynamics="original", cache=str(cache / "dara"), **settings)
     return cfg
 
 
