@@ -1,5 +1,5 @@
 """Summarise studies/dara_check: normalised scores per method and seed, and the verdicts of the
-rule fixed in README.md (learns: mean ≥ 50; DARA against MAPLE, paired by seed).
+two rules fixed in README.md (the first on seeds 0–2, the confirmatory one on seeds 3–5).
 
     .venv/bin/python studies/dara_check/summarise.py [RUNS_DIR]
 
@@ -12,24 +12,51 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-RULE_METHODS = ("maple", "maple_dara")
-"""The methods the rule decides on; others (the exploratory `maple_dara_eta1`) are listed only."""
-LEARNS_AT = 50.0
-"""A method learns if its mean normalised score over the seeds is at least this (rule)."""
 MARGIN = 10.0
-"""DARA better (worse): mean Δ ≥ MARGIN (≤ −MARGIN) and Δ of that sign on every seed (rule)."""
+"""DARA better (worse): mean Δ ≥ MARGIN (≤ −MARGIN) and Δ of that sign on every seed (both rules)."""
 LABELS = {
     "random": "random (reference)",
+    "still": "never moves, a = 0 (reference)",
     "optimal": "best target policy (reference)",
     "maple": "MAPLE",
-    "maple_dara": "MAPLE+DARA (η 0.1)",
-    "maple_dara_eta1": "MAPLE+DARA, η 1 (exploratory, outside the rule)",
+    "maple_dara": "MAPLE+DARA (η 0.1, σ 1: shipped)",
+    "maple_dara_eta1": "MAPLE+DARA, η 1 (exploratory)",
+    "maple_dara_eta3": "MAPLE+DARA, η 3 (exploratory)",
+    "maple_dara_noise01": "MAPLE+DARA, σ 0.1 (exploratory)",
+    "maple_dara_eta1_noise01": "MAPLE+DARA, η 1, σ 0.1",
 }
+
+
+class Rule(NamedTuple):
+    """One decision rule of README.md: its seeds, its DARA arm and its bar for *learns*."""
+
+    name: str
+    seeds: tuple[int, ...]
+    dara: str
+    learns_at: float
+    above_still: bool
+    """Also above the never-moving policy on every seed (the confirmatory rule)."""
+
+    def learns(self, by_seed: dict[str, float], still: dict[str, float]) -> bool:
+        scores = [by_seed[str(s)] for s in self.seeds]
+        if self.above_still and not all(by_seed[str(s)] > still[str(s)] for s in self.seeds):
+            return False
+        return float(np.mean(scores)) >= self.learns_at
+
+    @property
+    def bar(self) -> str:
+        return f"mean ≥ {self.learns_at:g}" + (", > never moving per seed" if self.above_still else "")
+
+
+RULES = (
+    Rule("first rule", (0, 1, 2), "maple_dara", 50.0, above_still=False),
+    Rule("confirmatory rule", (3, 4, 5), "maple_dara_eta1_noise01", 70.0, above_still=True),
+)
 
 
 def normalised(score: float, random: float, optimal: float) -> float:
@@ -38,7 +65,7 @@ def normalised(score: float, random: float, optimal: float) -> float:
 
 
 def dara_verdict(deltas: list[float]) -> str:
-    """The rule's verdict on DARA − MAPLE (normalised), paired by seed."""
+    """A rule's verdict on DARA − MAPLE (normalised), paired by seed."""
     mean = float(np.mean(deltas))
     if mean >= MARGIN and all(d > 0 for d in deltas):
         return "DARA better"
@@ -47,71 +74,93 @@ def dara_verdict(deltas: list[float]) -> str:
     return "no clear difference at this budget"
 
 
-def summarise(runs: Path) -> dict[str, Any]:
-    """{method: {seed: {return, normalised}}, mean per method, the verdicts}."""
-    raw: dict[str, dict[int, float]] = {}
-    for path in sorted(Path(runs).glob("*.json")):
-        run = json.loads(path.read_text())
-        raw.setdefault(run["method"], {})[int(run["seed"])] = float(run["score"])
-    methods: dict[str, Any] = {}
+def _norm(raw: dict[str, dict[int, float]]) -> dict[str, dict[str, dict[str, float]]]:
+    """{method: {seed: {return, normalised}}} for the seeds whose references were run."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
     for method, by_seed in raw.items():
-        rows = {
-            str(s): {
-                "return": r,
-                "normalised": normalised(r, raw["random"][s], raw["optimal"][s]),
-            }
+        out[method] = {
+            str(s): {"return": r, "normalised": normalised(r, raw["random"][s], raw["optimal"][s])}
             for s, r in sorted(by_seed.items())
-        }
-        methods[method] = {
-            "seeds": rows,
-            "mean": float(np.mean([v["normalised"] for v in rows.values()])),
-        }
-    out: dict[str, Any] = {"methods": methods, "learns": {}, "dara_vs_maple": None}
-    for m in RULE_METHODS:
-        if m in methods:
-            out["learns"][m] = methods[m]["mean"] >= LEARNS_AT
-    if all(m in methods for m in RULE_METHODS):
-        seeds = sorted(set(methods["maple"]["seeds"]) & set(methods["maple_dara"]["seeds"]))
-        deltas = [
-            methods["maple_dara"]["seeds"][s]["normalised"]
-            - methods["maple"]["seeds"][s]["normalised"]
-            for s in seeds
-        ]
-        out["dara_vs_maple"] = {
-            "seeds": seeds,
-            "deltas": deltas,
-            "mean": float(np.mean(deltas)),
-            "verdict": dara_verdict(deltas),
+            if s in raw.get("random", {}) and s in raw.get("optimal", {})
         }
     return out
 
 
+def summarise(runs: Path) -> dict[str, Any]:
+    """Per rule: each method's normalised scores on the rule's seeds, their mean, *learns* for
+    MAPLE and the rule's DARA arm, and DARA − MAPLE paired by seed (when every run exists)."""
+    raw: dict[str, dict[int, float]] = {}
+    for path in sorted(Path(runs).glob("*.json")):
+        run = json.loads(path.read_text())
+        raw.setdefault(run["method"], {})[int(run["seed"])] = float(run["score"])
+    scores = _norm(raw)
+    out: dict[str, Any] = {}
+    for rule in RULES:
+        seeds = [str(s) for s in rule.seeds]
+        methods = {
+            m: {
+                "seeds": {s: by[s] for s in seeds if s in by},
+                "mean": float(np.mean([by[s]["normalised"] for s in seeds if s in by])),
+            }
+            for m, by in scores.items()
+            if any(s in by for s in seeds)
+        }
+        part: dict[str, Any] = {"seeds": seeds, "bar": rule.bar, "methods": methods, "learns": {}}
+        complete = {m for m, v in methods.items() if len(v["seeds"]) == len(seeds)}
+        if "still" in complete or not rule.above_still:
+            still = {s: v["normalised"] for s, v in methods.get("still", {"seeds": {}})["seeds"].items()}
+            for m in ("maple", rule.dara):
+                if m in complete:
+                    by = {s: v["normalised"] for s, v in methods[m]["seeds"].items()}
+                    part["learns"][m] = rule.learns(by, still)
+        part["dara_vs_maple"] = None
+        if {"maple", rule.dara} <= complete:
+            deltas = [
+                methods[rule.dara]["seeds"][s]["normalised"] - methods["maple"]["seeds"][s]["normalised"]
+                for s in seeds
+            ]
+            part["dara_vs_maple"] = {
+                "dara": rule.dara,
+                "deltas": deltas,
+                "mean": float(np.mean(deltas)),
+                "verdict": dara_verdict(deltas),
+            }
+        out[rule.name] = part
+    return out
+
+
 def table(res: dict[str, Any]) -> str:
-    """The markdown table (normalised score, return in brackets) and the rule's verdicts."""
-    methods = res["methods"]
-    seeds = sorted({s for m in methods.values() for s in m["seeds"]}, key=int)
-    lines = [
-        "| method | " + " | ".join(f"seed {s}" for s in seeds) + " | mean | learns (≥ 50) |",
-        "|---" * (len(seeds) + 3) + "|",
-    ]
-    for key in [k for k in LABELS if k in methods] + sorted(set(methods) - set(LABELS)):
-        m = methods[key]
-        cells = [
-            f"{m['seeds'][s]['normalised']:.1f} (R {m['seeds'][s]['return']:.2f})"
-            if s in m["seeds"]
-            else "—"
-            for s in seeds
+    """One markdown table per rule (normalised score, return in brackets) and its verdicts."""
+    lines: list[str] = []
+    for name, part in res.items():
+        methods, seeds = part["methods"], part["seeds"]
+        if not methods:
+            continue
+        lines += [
+            f"**{name}** (seeds {', '.join(seeds)}; learns: {part['bar']})",
+            "",
+            "| method | " + " | ".join(f"seed {s}" for s in seeds) + " | mean | learns |",
+            "|---" * (len(seeds) + 3) + "|",
         ]
-        learns = res["learns"].get(key)
-        verdict = "—" if learns is None else ("yes" if learns else "no")
-        lines.append(
-            f"| {LABELS.get(key, key)} | " + " | ".join(cells) + f" | {m['mean']:.1f} | {verdict} |"
-        )
-    d = res["dara_vs_maple"]
-    if d:
-        per = ", ".join(f"seed {s}: {x:+.1f}" for s, x in zip(d["seeds"], d["deltas"], strict=True))
-        lines += ["", f"DARA − MAPLE (normalised): mean {d['mean']:+.1f} ({per}): {d['verdict']}."]
-    return "\n".join(lines) + "\n"
+        for key in [k for k in LABELS if k in methods] + sorted(set(methods) - set(LABELS)):
+            m = methods[key]
+            cells = [
+                f"{m['seeds'][s]['normalised']:.1f} (R {m['seeds'][s]['return']:.2f})"
+                if s in m["seeds"]
+                else "—"
+                for s in seeds
+            ]
+            learns = part["learns"].get(key)
+            verdict = "—" if learns is None else ("yes" if learns else "no")
+            label = LABELS.get(key, key)
+            lines.append(f"| {label} | " + " | ".join(cells) + f" | {m['mean']:.1f} | {verdict} |")
+        d = part["dara_vs_maple"]
+        if d:
+            per = ", ".join(f"seed {s}: {x:+.1f}" for s, x in zip(seeds, d["deltas"], strict=True))
+            lines += ["", f"{LABELS[d['dara']]} − MAPLE (normalised): mean {d['mean']:+.1f} "
+                      f"({per}): {d['verdict']}."]  # fmt: skip
+        lines.append("")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ run files and a `study.toml` that says how to tabulate them:
 
     title = "..."
     [table]                 # the runner's own table, rebuilt from the run files
-    runner = "race"         # race | lava | mujoco | script (the folder's summarise.py) | race_speed
+    runner = "race"         # race | lava | mujoco | cql | script (the folder's summarise.py) | race_speed
     methods = ["ppo", ...]  # lava and race: the rows, in order
     layout = "B"            # lava only
     [[compare]]             # zero or more comparisons (studies.lib.compare)
@@ -69,6 +69,10 @@ def runner_table(folder: Path, spec: dict[str, Any]) -> str:
         from studies.lib.mujoco_shift import summarize
 
         return summarize(folder)
+    if kind == "cql":
+        from studies.lib.offline_cql import summarize
+
+        return summarize(folder)
     if kind == "script":
         import importlib.util
 
@@ -84,7 +88,7 @@ def runner_table(folder: Path, spec: dict[str, Any]) -> str:
     if kind == "race_speed":
         return race_speed_table(folder / spec.get("file", "race_speed.json"), spec)
     raise ValueError(f"{folder / 'study.toml'}: table.runner={kind!r}; allowed: lava, race, "
-                     "mujoco, script, race_speed")
+                     "mujoco, cql, script, race_speed")
 
 
 def race_speed_table(path: Path, spec: dict[str, Any]) -> str:

@@ -43,3 +43,13 @@ def test_the_best_target_policy_beats_random_and_the_rules_verdicts():
     assert summary.dara_verdict([30.0, 30.0, -1.0]) == "no clear difference at this budget"
     assert summary.dara_verdict([-10.0, -10.0, -10.0]) == "DARA worse"
     assert summary.dara_verdict([0.0, 0.0, 0.0]) == "no clear difference at this budget"
+
+
+def test_the_confirmatory_bar_needs_every_seed_above_never_moving():
+    summary = study_script("dara_check", "summarise")
+    first, confirmatory = summary.RULES
+    still = {"3": 50.0, "4": 50.0, "5": 50.0}
+    assert confirmatory.learns({"3": 80.0, "4": 75.0, "5": 70.0}, still)
+    assert not confirmatory.learns({"3": 100.0, "4": 100.0, "5": 49.0}, still)  # mean 83, one below
+    assert not confirmatory.learns({"3": 69.0, "4": 70.0, "5": 70.0}, still)  # mean under 70
+    assert first.learns({"0": 50.0, "1": 50.0, "2": 50.0}, {})  # the first rule: mean ≥ 50 only
