@@ -29,6 +29,9 @@ from studies.lib.common import mean_std, run_if_missing, start_local_ray
 from studies.lib.mujoco_shift import parse_method
 
 DEFAULT_METHODS = ("cql", "srpo:mode=srpo", "asor:mode=asor")
+MARGIN = 5.0
+"""A method is better (worse) than CQL if its mean paired Δ of the mean score is ≥ MARGIN
+(≤ −MARGIN) and Δ has that sign on every seed (studies/cql_hopper's rule)."""
 ASOR_BASE = {"preset": "paper", "lambda_": 0.1, "rho_value": 0.5, "rho_count": 0.5, "proxy": "rnd", "reward_form": "log"}
 """The offline tuned examples' ASOR block (λ 0.1: SRPO's fixed value)."""
 
@@ -128,10 +131,36 @@ def summarize(out: Path) -> str:
             + " | ".join(mean_std(per[d]) for d in dyns)
             + f" | {mean_std(means)} | {mean_std(returns)} | {np.mean([r['wall_s'] for r in rs]):.0f} |"
         )
+    for quality, method in keys:
+        base = {r["seed"]: r for r in runs if r["quality"] == quality and r["method"] == "cql"}
+        mine = {r["seed"]: r for r in runs if r["quality"] == quality and r["method"] == method}
+        seeds = sorted(set(base) & set(mine))
+        if method == "cql" or not seeds:
+            continue
+        deltas = [_score(mine[s]) - _score(base[s]) for s in seeds]
+        per = ", ".join(f"seed {s}: {d:+.1f}" for s, d in zip(seeds, deltas, strict=True))
+        verdict = paired_verdict(deltas)
+        table[f"{quality}/{method}"]["minus_cql"] = {"seeds": seeds, "deltas": deltas, "verdict": verdict}
+        lines.append(f"\n{quality}: {method} − cql (mean score, paired by seed): mean "
+                     f"{np.mean(deltas):+.1f} ({per}): {verdict}.")  # fmt: skip
     md = "\n".join(lines) + "\n"
     (out / "table.md").write_text(md)
     (out / "summary.json").write_text(json.dumps(table, indent=1))
     return md
+
+
+def _score(run: dict[str, Any]) -> float:
+    return float(run["eval"]["mean"]["normalized_score"])
+
+
+def paired_verdict(deltas: list[float]) -> str:
+    """The rule's verdict on a method − CQL, paired by seed."""
+    mean = float(np.mean(deltas))
+    if mean >= MARGIN and all(d > 0 for d in deltas):
+        return "better"
+    if mean <= -MARGIN and all(d < 0 for d in deltas):
+        return "worse"
+    return "no clear difference at this budget"
 
 
 def _order(method: str) -> int:

@@ -114,3 +114,12 @@ def test_gain_needs_five_pairs_an_interval_above_zero_and_five_percent(tmp_path:
         write_escp_run(tmp_path, "escp_asor", seed, 1010.0 + 10 * seed + seed % 2)
     rows = {(c["treatment"], c["metric"]): c["rule"] for c in escp_summary(tmp_path)["comparisons"]}
     assert rows[("escp_asor", "stationary")] == "no detectable difference"
+
+
+def test_cql_hopper_paired_verdict_is_the_rules():
+    from studies.lib.offline_cql import paired_verdict
+
+    assert paired_verdict([21.2, 3.6, 27.8]) == "better"  # mean ≥ 5, every seed > 0
+    assert paired_verdict([30.0, 30.0, -0.1]) == "no clear difference at this budget"
+    assert paired_verdict([4.0, 5.0, 5.0]) == "no clear difference at this budget"  # mean < 5
+    assert paired_verdict([-5.0, -6.0, -4.0]) == "worse"
