@@ -37,7 +37,8 @@ class DaraSettings(Settings):
     ] = [32]
     """Hidden ReLU layers of each classifier (DARC: one of 32)."""
     input_noise: NonNegative = 1.0
-    """σ of the Gaussian noise on the classifiers' inputs in training (DARC: 1.0)."""
+    """σ of the Gaussian noise on the classifiers' raw inputs in training (DARC: 1.0). Absolute:
+    keep it small next to the features that tell the dynamics apart (docs/baselines.md)."""
     lr: Positive = 3e-4
     """Adam lr of the classifiers (DARC: 3e-4)."""
     batch_size: AtLeast1 = 256
