@@ -38,17 +38,25 @@ the first rule's; the next three are exploratory; `maple_dara_eta1_noise01` is t
 confirmatory rule's."""
 
 
+DATA_STARTS = {"": (-0.5, 0.5), "cover": (-1.0, 10.0)}
+"""Start states of the data's episodes: the task's own, and `cover` (the coverage rule, README):
+spread over the track, so the target's data reaches the states the source's data visits."""
+
+
 class SlipEnv(gym.Env):
     """x ← x + a for a ≤ 0.5; above 0.5 the target (`original`) slips back (x − 1), the source
-    (`boost`) jumps (x + 2a). Reward 1 − |x′ − 6|/6, 20 steps, x0 ~ U(−0.5, 0.5), |x| ≤ 10."""
+    (`boost`) jumps (x + 2a). Reward 1 − |x′ − 6|/6, 20 steps, x0 ~ U(start) (U(−0.5, 0.5)),
+    |x| ≤ 10."""
 
     observation_space = gym.spaces.Box(-LIMIT, LIMIT, (2,), np.float32)
     action_space = gym.spaces.Box(-1, 1, (1,), np.float32)
 
-    def __init__(self, dynamics: str = "original", seed: int = 0) -> None:
+    def __init__(
+        self, dynamics: str = "original", seed: int = 0, start: tuple[float, float] = (-0.5, 0.5)
+    ) -> None:
         if dynamics not in EPISODES:
             raise ValueError(f"dynamics={dynamics!r} is invalid: allowed {' | '.join(EPISODES)}")
-        self.dynamics = dynamics
+        self.dynamics, self.start = dynamics, start
         self._rng = np.random.default_rng(seed)
 
     def _obs(self) -> np.ndarray:
@@ -57,7 +65,7 @@ class SlipEnv(gym.Env):
     def reset(self, *, seed=None, options=None):
         if seed is not None:
             self._rng = np.random.default_rng(seed)
-        self.x, self.t = float(self._rng.uniform(-0.5, 0.5)), 0
+        self.x, self.t = float(self._rng.uniform(*self.start)), 0
         return self._obs(), {}
 
     def step(self, action):
@@ -80,9 +88,11 @@ def register() -> None:
     register_termination("slip", lambda o: ~np.isfinite(o).all(-1))
 
 
-def rollout(policy, dynamics: str, episodes: int, seed: int) -> list[tuple]:
+def rollout(
+    policy, dynamics: str, episodes: int, seed: int, start: tuple[float, float] = (-0.5, 0.5)
+) -> list[tuple]:
     """(obs [T+1], actions [T], rewards [T]) of `episodes` episodes; policy(obs, rng) -> a."""
-    env, rng, out = SlipEnv(dynamics, seed), np.random.default_rng(seed + 1), []
+    env, rng, out = SlipEnv(dynamics, seed, start), np.random.default_rng(seed + 1), []
     for e in range(episodes):
         obs, _ = env.reset(seed=seed * 1000 + e)
         o, a, r = [obs], [], []
@@ -118,9 +128,10 @@ def reference_policies() -> dict:
     }
 
 
-def make_data() -> list[str]:
+def make_data(variant: str = "") -> list[str]:
     """The two parts `data/slip/<dynamics>/mixed` (parquet rows of SingleAgentEpisode states,
-    `rllib data collect`'s layout), made once with seed 0 and 1."""
+    `rllib data collect`'s layout), made once with seed 0 and 1; `variant` "cover":
+    `data/slip_cover/...`, the same but every episode starts at x0 ~ U(DATA_STARTS["cover"])."""
     import msgpack
     import msgpack_numpy as mnp
     import pyarrow as pa
@@ -129,12 +140,12 @@ def make_data() -> list[str]:
 
     parts = []
     for i, (dyn, n) in enumerate(EPISODES.items()):
-        part = DATA / "slip" / dyn / "mixed"
+        part = DATA / "_".join(filter(None, ("slip", variant))) / dyn / "mixed"
         parts.append(str(part))
         if (part / "part-00000.parquet").is_file():
             continue
         rows = []
-        for obs, acts, rews in rollout(behaviour(i), dyn, n, seed=i):
+        for obs, acts, rews in rollout(behaviour(i), dyn, n, seed=i, start=DATA_STARTS[variant]):
             ep = SingleAgentEpisode(
                 observation_space=SlipEnv.observation_space,
                 action_space=SlipEnv.action_space,
@@ -231,7 +242,6 @@ def main() -> None:
     torch.set_num_threads(1)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     register()
-    parts = make_data()
     RUNS.mkdir(exist_ok=True)
     for seed in args.seeds:
         for method in args.methods:
@@ -239,7 +249,8 @@ def main() -> None:
             if path.is_file():
                 continue
             result = {"method": method, "seed": seed, "iters": args.iters}
-            result.update(run(method, seed, args.iters, parts))
+            variant = method.partition("+")[2]  # `maple+cover`: MAPLE on the `cover` data
+            result.update(run(method.partition("+")[0], seed, args.iters, make_data(variant)))
             path.write_text(json.dumps(result, indent=1, sort_keys=True) + "\n")
             print(path.name, json.dumps(result), flush=True)
     from summarise import summarise, table

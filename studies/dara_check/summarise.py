@@ -1,5 +1,6 @@
 """Summarise studies/dara_check: normalised scores per method and seed, and the verdicts of the
-two rules fixed in README.md (the first on seeds 0–2, the confirmatory one on seeds 3–5).
+three rules fixed in README.md (the first on seeds 0–2, the confirmatory one on seeds 3–5, the
+coverage rule on seeds 6–8 and the data whose target part covers the source's states).
 
     .venv/bin/python studies/dara_check/summarise.py [RUNS_DIR]
 
@@ -29,18 +30,22 @@ LABELS = {
     "maple_dara_eta3": "MAPLE+DARA, η 3 (exploratory)",
     "maple_dara_noise01": "MAPLE+DARA, σ 0.1 (exploratory)",
     "maple_dara_eta1_noise01": "MAPLE+DARA, η 1, σ 0.1",
+    "maple+cover": "MAPLE, covering data",
+    "maple_dara+cover": "MAPLE+DARA (η 0.1, σ 1: shipped), covering data",
+    "maple_dara_eta1_noise01+cover": "MAPLE+DARA, η 1, σ 0.1, covering data",
 }
 
 
 class Rule(NamedTuple):
-    """One decision rule of README.md: its seeds, its DARA arm and its bar for *learns*."""
+    """One decision rule of README.md: its seeds, its DARA and MAPLE arms, its bar for *learns*."""
 
     name: str
     seeds: tuple[int, ...]
     dara: str
     learns_at: float
     above_still: bool
-    """Also above the never-moving policy on every seed (the confirmatory rule)."""
+    """Also above the never-moving policy on every seed (the later rules)."""
+    maple: str = "maple"
 
     def learns(self, by_seed: dict[str, float], still: dict[str, float]) -> bool:
         scores = [by_seed[str(s)] for s in self.seeds]
@@ -56,6 +61,7 @@ class Rule(NamedTuple):
 RULES = (
     Rule("first rule", (0, 1, 2), "maple_dara", 50.0, above_still=False),
     Rule("confirmatory rule", (3, 4, 5), "maple_dara_eta1_noise01", 70.0, above_still=True),
+    Rule("coverage rule", (6, 7, 8), "maple_dara_eta1_noise01+cover", 70.0, True, "maple+cover"),
 )
 
 
@@ -109,18 +115,20 @@ def summarise(runs: Path) -> dict[str, Any]:
         complete = {m for m, v in methods.items() if len(v["seeds"]) == len(seeds)}
         if "still" in complete or not rule.above_still:
             still = {s: v["normalised"] for s, v in methods.get("still", {"seeds": {}})["seeds"].items()}
-            for m in ("maple", rule.dara):
+            for m in (rule.maple, rule.dara):
                 if m in complete:
                     by = {s: v["normalised"] for s, v in methods[m]["seeds"].items()}
                     part["learns"][m] = rule.learns(by, still)
         part["dara_vs_maple"] = None
-        if {"maple", rule.dara} <= complete:
+        if {rule.maple, rule.dara} <= complete:
             deltas = [
-                methods[rule.dara]["seeds"][s]["normalised"] - methods["maple"]["seeds"][s]["normalised"]
+                methods[rule.dara]["seeds"][s]["normalised"]
+                - methods[rule.maple]["seeds"][s]["normalised"]
                 for s in seeds
             ]
             part["dara_vs_maple"] = {
                 "dara": rule.dara,
+                "maple": rule.maple,
                 "deltas": deltas,
                 "mean": float(np.mean(deltas)),
                 "verdict": dara_verdict(deltas),
@@ -157,7 +165,7 @@ def table(res: dict[str, Any]) -> str:
         d = part["dara_vs_maple"]
         if d:
             per = ", ".join(f"seed {s}: {x:+.1f}" for s, x in zip(seeds, d["deltas"], strict=True))
-            lines += ["", f"{LABELS[d['dara']]} − MAPLE (normalised): mean {d['mean']:+.1f} "
+            lines += ["", f"{LABELS[d['dara']]} − {LABELS[d['maple']]} (normalised): mean {d['mean']:+.1f} "
                       f"({per}): {d['verdict']}."]  # fmt: skip
         lines.append("")
     return "\n".join(lines)

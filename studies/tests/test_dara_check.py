@@ -47,7 +47,8 @@ def test_the_best_target_policy_beats_random_and_the_rules_verdicts():
 
 def test_the_confirmatory_bar_needs_every_seed_above_never_moving():
     summary = study_script("dara_check", "summarise")
-    first, confirmatory = summary.RULES
+    first, confirmatory, coverage = summary.RULES
+    assert coverage.maple == "maple+cover" and coverage.above_still
     still = {"3": 50.0, "4": 50.0, "5": 50.0}
     assert confirmatory.learns({"3": 80.0, "4": 75.0, "5": 70.0}, still)
     assert not confirmatory.learns({"3": 100.0, "4": 100.0, "5": 49.0}, still)  # mean 83, one below
