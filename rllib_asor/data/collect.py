@@ -259,7 +259,8 @@ def collect(
     if not dynamics:
         raise ValueError("dynamics is empty: allowed one or more of " + ", ".join(DYNAMICS))
     if not ray.is_initialized():
-        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+        # "local": a `ray start` cluster on this machine would refuse num_cpus (as the CLI does)
+        ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
 
     out = Path(out).resolve()  # RLModule.save_to_path wants an absolute path (a URI)
     task = task_name(env_id)

@@ -40,6 +40,10 @@ def cluster():
     ray.shutdown()
     c = Cluster(initialize_head=True, head_node_args={
         **NODE, "include_dashboard": False, "_system_config": HEAD_SYSTEM_CONFIG})
+    # Cluster writes /tmp/ray/ray_current_cluster, which makes every plain `ray.init()` on this
+    # machine join it, a test on the other pytest worker included (it then fails: num_cpus is
+    # refused when joining). This module joins by address, so the file goes.
+    ray._common.utils.reset_ray_address()
     try:
         c.workers = [c.add_node(**NODE, resources={SLOT: 1}) for _ in range(2)]
         c.wait_for_nodes()
