@@ -146,6 +146,11 @@ def test_the_aux_optimizers_take_the_settings_learning_rates_and_weight_decay():
     assert len(trainable) < len(list(lrn.module[PROXY].parameters()))
 
 
+def test_a_fresh_learner_counts_no_aux_rows_until_it_has_seen_a_batch():
+    lrn = learner(aux_epochs=3)
+    assert lrn.aux_rows(DISC) == 0 and lrn.aux_rows(PROXY) == 0
+
+
 def test_maples_bonus_rows_get_the_configs_gamma(monkeypatch):
     from tests.rllib.test_soft_q_glue import maple_batch, maple_learner
 
