@@ -17,6 +17,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from studies.lib.compare import sign_rule
+
 HERE = Path(__file__).resolve().parent
 MARGIN = 10.0
 """DARA better (worse): mean Δ ≥ MARGIN (≤ −MARGIN) and Δ of that sign on every seed (both rules)."""
@@ -72,12 +74,9 @@ def normalised(score: float, random: float, optimal: float) -> float:
 
 def dara_verdict(deltas: list[float]) -> str:
     """A rule's verdict on DARA − MAPLE (normalised), paired by seed."""
-    mean = float(np.mean(deltas))
-    if mean >= MARGIN and all(d > 0 for d in deltas):
-        return "DARA better"
-    if mean <= -MARGIN and all(d < 0 for d in deltas):
-        return "DARA worse"
-    return "no clear difference at this budget"
+    return {1: "DARA better", -1: "DARA worse", 0: "no clear difference at this budget"}[
+        sign_rule(deltas, MARGIN)
+    ]
 
 
 def _norm(raw: dict[str, dict[int, float]]) -> dict[str, dict[str, dict[str, float]]]:

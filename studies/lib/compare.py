@@ -35,6 +35,17 @@ def _std(x: np.ndarray) -> float:
     return float(x.std(ddof=1)) if len(x) > 1 else 0.0
 
 
+def sign_rule(deltas: Sequence[float], margin: float) -> int:
+    """The studies' fixed-before-the-runs rule on paired differences: +1 if their mean is
+    ≥ `margin` and every one is > 0, −1 for the mirror image, 0 otherwise."""
+    mean = float(np.mean(deltas))
+    if mean >= margin and all(d > 0 for d in deltas):
+        return 1
+    if mean <= -margin and all(d < 0 for d in deltas):
+        return -1
+    return 0
+
+
 def compare_paired(baseline: dict[Any, float], treatment: dict[Any, float]) -> dict[str, float]:
     """Seed-by-seed comparison over the seeds in both: diff = mean of (treatment − baseline),
     its 95% interval over seeds (the project's BCa interval of a mean; NaN for one pair), and

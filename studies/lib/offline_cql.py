@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from studies.lib.common import mean_std, run_if_missing, start_local_ray
+from studies.lib.compare import sign_rule
 from studies.lib.mujoco_shift import parse_method
 
 DEFAULT_METHODS = ("cql", "srpo:mode=srpo", "asor:mode=asor")
@@ -155,12 +156,9 @@ def _score(run: dict[str, Any]) -> float:
 
 def paired_verdict(deltas: list[float]) -> str:
     """The rule's verdict on a method − CQL, paired by seed."""
-    mean = float(np.mean(deltas))
-    if mean >= MARGIN and all(d > 0 for d in deltas):
-        return "better"
-    if mean <= -MARGIN and all(d < 0 for d in deltas):
-        return "worse"
-    return "no clear difference at this budget"
+    return {1: "better", -1: "worse", 0: "no clear difference at this budget"}[
+        sign_rule(deltas, MARGIN)
+    ]
 
 
 def _order(method: str) -> int:
