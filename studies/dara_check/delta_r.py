@@ -9,39 +9,29 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from rllib_asor.algorithms.dara.classifiers import delta_reward
-from rllib_asor.algorithms.dara.relabel import load_classifiers
+from rllib_asor.algorithms.dara.relabel import load_classifiers, transitions
+from rllib_asor.algorithms.maple.data import read_part
 
 HERE = Path(__file__).resolve().parent
 
 
 def main() -> None:
-    import run  # this folder's run.py: the task and the data's behaviour policy
-
-    def source_rows(variant: str):
-        starts = run.DATA_STARTS[variant]
-        episodes = run.rollout(run.behaviour(1), "boost", run.EPISODES["boost"], 1, starts)
-        obs = torch.tensor(np.concatenate([e[0][:-1] for e in episodes]))
-        act = torch.tensor(np.concatenate([e[1] for e in episodes]))
-        nxt = torch.tensor(np.concatenate([e[0][1:] for e in episodes]))
-        return obs, act, nxt  # make_data's source part
-
     print("| data | seed | η | σ | Δr, a > 0.5 | a > 0.5, x ≤ 3 | a > 0.5, x > 3 | a ≤ 0.5 |")
     print("|---|---|---|---|---|---|---|---|")
     rows = []
     for copy in sorted((HERE / "data" / "cache" / "dara").iterdir()):
         info = json.loads((copy / "dara.json").read_text())
         s = info["settings"]
-        part = next(copy.glob("slip*/*/mixed"))
-        variant = part.parent.parent.name.partition("_")[2]
-        obs, act, nxt = source_rows(variant)
+        source = next(copy.glob("slip*/boost/mixed"))  # the copy keeps the states and actions
+        obs, act, nxt = (torch.as_tensor(x) for x in transitions(read_part(source)))
         big, far = act[:, 0].numpy() > 0.5, obs[:, 0].numpy() > 3
-        dr = delta_reward(load_classifiers(str(part)), obs, act, nxt, s["delta_clip"]).numpy()
+        dr = delta_reward(load_classifiers(str(source)), obs, act, nxt, s["delta_clip"]).numpy()
         cells = [dr[big].mean(), dr[big & ~far].mean(), dr[big & far].mean(), dr[~big].mean()]
-        rows.append((variant or "task", info["seed"], s["eta"], s["input_noise"], *cells))
+        variant = source.parent.parent.name.partition("_")[2] or "task"  # slip, slip_cover
+        rows.append((variant, info["seed"], s["eta"], s["input_noise"], *cells))
     for variant, seed, eta, noise, *cells in sorted(rows):
         print(f"| {variant} | {seed} | {eta:g} | {noise:g} | "
               + " | ".join(f"{c:+.2f}" for c in cells) + " |")  # fmt: skip

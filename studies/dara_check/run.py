@@ -249,8 +249,8 @@ def main() -> None:
             if path.is_file():
                 continue
             result = {"method": method, "seed": seed, "iters": args.iters}
-            variant = method.partition("+")[2]  # `maple+cover`: MAPLE on the `cover` data
-            result.update(run(method.partition("+")[0], seed, args.iters, make_data(variant)))
+            arm, _, variant = method.partition("+")  # `maple+cover`: MAPLE on the `cover` data
+            result.update(run(arm, seed, args.iters, make_data(variant)))
             path.write_text(json.dumps(result, indent=1, sort_keys=True) + "\n")
             print(path.name, json.dumps(result), flush=True)
     from summarise import summarise, table

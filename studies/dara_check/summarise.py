@@ -21,7 +21,7 @@ from studies.lib.compare import sign_rule
 
 HERE = Path(__file__).resolve().parent
 MARGIN = 10.0
-"""DARA better (worse): mean Δ ≥ MARGIN (≤ −MARGIN) and Δ of that sign on every seed (both rules)."""
+"""DARA better (worse): mean Δ ≥ MARGIN (≤ −MARGIN) and Δ of that sign on every seed (every rule)."""
 LABELS = {
     "random": "random (reference)",
     "still": "never moves, a = 0 (reference)",

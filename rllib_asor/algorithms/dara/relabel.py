@@ -31,7 +31,7 @@ INFO = "dara.json"
 """What a relabelled copy records beside its parts (settings, classifier statistics)."""
 
 
-def _transitions(episodes: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
+def transitions(episodes: list[tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
     """(s, a, s′) of every step of `episodes` (read_part's tuples), concatenated."""
     obs = np.concatenate([e[0][:-1] for e in episodes])
     actions = np.concatenate([e[1] for e in episodes])
@@ -106,7 +106,7 @@ def dara_parts(
     parts = [read_part(p) for p in paths]
     target = [e for p, d in zip(parts, dyns, strict=True) if d == s.target_dynamics for e in p]
     source = [e for p, d in zip(parts, dyns, strict=True) if d != s.target_dynamics for e in p]
-    model, stats = train_classifiers(_transitions(source), _transitions(target), s, seed)
+    model, stats = train_classifiers(transitions(source), transitions(target), s, seed)
     deltas = []
     tmp = Path(tempfile.mkdtemp(prefix=f".{key}.tmp-", dir=_mkdir(root)))
     try:
