@@ -49,11 +49,8 @@ RLlib sets unknown top-level config keys as plain attributes (`AlgorithmConfig.u
 and validates none of them, so the key reaches ``params.json`` without changing training."""
 
 SMOKE_KEY = "rllib_asor_smoke"
-"""Params key, truthy in the trials of `rllib train --test` / `rllib ab --test`: smoke runs, which
-`rllib compare` labels as such and gives no verdict (recorded as `RUN_KEY` is)."""
-SMOKE_KEY = "rllib_asor_smoke"
 """Params key `rllib train --test` and `rllib ab --test` set (True): a smoke run, too short to
-judge."""
+judge; `rllib compare` labels its trials smoke and gives them no verdict."""
 
 
 @dataclass
