@@ -7,7 +7,8 @@ checked before the run, `arm_differences`), greedy
 evaluation during training (RLlib's evaluation env runners, returns per ``dynamics_id``), then
 every final checkpoint is evaluated on the same episodes (`evaluation.json` per trial) and
 `rllib compare` prints the paired result; tables and figures go to ``<experiment>/ab/``.
-Rerunning the same command resumes: finished trials and evaluations are kept.
+Rerunning the same command resumes: finished trials and evaluations are kept, seeds the folder
+lacks are run, and a file whose settings changed is refused (`rllib_asor.cli.manifest`).
 """
 
 from __future__ import annotations
@@ -44,7 +45,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="evaluate every N iterations during training (default: the file's "
         "evaluation_interval, else 5 or the stop's training_iteration if fewer; --test: 1)",
     )
-    parser.add_argument("--name", help="experiment folder (default: NAME-ab of the file)")
+    parser.add_argument(
+        "--name", help="experiment folder (default: NAME-ab of the file, NAME-ab-test with --test)"
+    )
+    parser.add_argument(
+        "--fresh",
+        action="store_true",
+        help="start over: the folder of this name is renamed NAME.replaced-TIME",
+    )
     parser.add_argument("--storage-path", help=f"results root (default {DEFAULT_STORAGE})")
     parser.add_argument("--test", action="store_true", help="tiny run, as `rllib train --test`")
     parser.add_argument("--num-env-runners", type=int, help="override num_env_runners")
@@ -173,14 +181,16 @@ def prepared_arms(args: argparse.Namespace) -> list[tuple[str, Any, Any]]:
     return [(base_name, base, _prepare(base, args)), (treat_name, treat, treat_config)]
 
 
-def param_space(named: list[tuple[str, Any, Any]], seeds: int) -> dict[str, Any]:
+def param_space(
+    named: list[tuple[str, Any, Any]], seeds: list[int], smoke: bool = False
+) -> dict[str, Any]:
     """One Tune space for both arms: a grid over (arm, seed); every key whose value differs
     between the arms is resolved from the trial's arm (`tune.sample_from`)."""
     from ray import tune
 
     from rllib_asor.cli import experiment
     from rllib_asor.report.grouping import ARM_KEY
-    from rllib_asor.report.results import RUN_KEY
+    from rllib_asor.report.results import RUN_KEY, SMOKE_KEY
 
     spaces = {}
     for name, exp, cfg in named:
@@ -196,7 +206,9 @@ def param_space(named: list[tuple[str, Any, Any]], seeds: int) -> dict[str, Any]
         if any(v != values[0] for v in values[1:]) or key not in first:
             out[key] = tune.sample_from(lambda config, key=key: spaces[config[ARM_KEY]].get(key))
     out[ARM_KEY] = tune.grid_search(list(spaces))
-    out["seed"] = tune.grid_search(list(range(seeds)))
+    out["seed"] = tune.grid_search(list(seeds))
+    if smoke:
+        out[SMOKE_KEY] = True  # `rllib compare` gives smoke runs no verdict
     return out
 
 
@@ -215,19 +227,33 @@ def trainable_for(named: list[tuple[str, Any, Any]], source: str) -> Any:
         raise UsageError(str(e), source=source) from None
 
 
+def seed_batches(record: dict[str, Any], seeds: int) -> list[dict[str, Any]]:
+    """The Tune experiments of the folder (``{"dir", "seeds"}``; the first one is the folder
+    itself), with a new one for the seeds 0..`seeds`-1 that none holds yet (added to `record`)."""
+    batches = record.setdefault("seeds", [])
+    held = {s for b in batches for s in b["seeds"]}
+    new = [s for s in range(seeds) if s not in held]
+    if new:
+        name = "" if not batches else f"seeds-{new[0]}-{new[-1]}"
+        batches.append({"dir": name, "seeds": new})
+    return batches
+
+
 def fit(
-    args: argparse.Namespace, named: list[tuple[str, Any, Any]], path: str, trainable: Any
+    args: argparse.Namespace,
+    named: list[tuple[str, Any, Any]],
+    path: str,
+    seeds: list[int],
+    trainable: Any,
 ) -> Any:
-    """Run (or resume) the Tune experiment at `path`; its ResultGrid."""
+    """Run (or resume) the Tune experiment of `seeds` at `path`; its ResultGrid."""
     from ray import tune
 
     from rllib_asor.cli import experiment
     from rllib_asor.cli.progress import LineReporter
-    from rllib_asor.registry import env_names
 
     exp = named[-1][1]
-    env_names.register_env(exp.env)
-    space = param_space(named, args.seeds)
+    space = param_space(named, seeds, smoke=args.test)
     if tune.Tuner.can_restore(path):
         print(f"rllib ab: resuming {path} (finished trials are kept)", flush=True)
         tuner = tune.Tuner.restore(
@@ -265,7 +291,8 @@ def evaluate_trials(results: Any, episodes: int) -> list[str]:
         ckpt = result.checkpoint.path
         if out.is_file():
             try:
-                if json.loads(out.read_text()).get("checkpoint") == ckpt:
+                held = json.loads(out.read_text())
+                if held.get("checkpoint") == ckpt and held.get("episodes") == episodes:
                     continue
             except (OSError, json.JSONDecodeError):
                 pass
@@ -279,15 +306,15 @@ def evaluate_trials(results: Any, episodes: int) -> list[str]:
     return problems
 
 
-def write_outputs(path: str, baseline: str) -> str:
-    """Compare the trials at `path`; write compare.md/json and the figures to `path/ab`;
-    the text printed."""
+def write_outputs(path: str, baseline: str, trials: list[str] | None = None) -> str:
+    """Compare the trials at `path` (only the trial folders `trials` when given); write
+    compare.md/json and the figures to `path/ab`; the text printed."""
     from rllib_asor.report.compare import compare, render_text
     from rllib_asor.report.files import atomic_write
     from rllib_asor.report.plots import plot_curves, plot_dynamics, plot_paired
     from rllib_asor.report.scores import EVAL_KEY, TRAIN_KEY
 
-    comp = compare([path], baseline=baseline)
+    comp = compare(trials or [path], baseline=baseline)
     out = Path(path) / "ab"
     out.mkdir(exist_ok=True)
     text = render_text(comp)
@@ -315,8 +342,10 @@ def write_outputs(path: str, baseline: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """`rllib ab`: 0 when every trial finished and was evaluated, 1 otherwise, 2 bad input."""
+    from rllib_asor.cli import manifest
     from rllib_asor.cli.cluster import start_ray
     from rllib_asor.cli.experiment import required_cpus
+    from rllib_asor.registry import env_names
 
     if args.seeds < 2:
         raise UsageError(f"{args.seeds} is invalid: allowed an integer >= 2", key="--seeds")
@@ -329,21 +358,38 @@ def run(args: argparse.Namespace) -> int:
     root = os.path.abspath(
         os.path.expanduser(args.storage_path or exp.storage_path or DEFAULT_STORAGE)
     )
-    path = os.path.join(root, args.name or f"{exp.name}-ab")
+    smoke = manifest.SMOKE_SUFFIX if args.test else ""
+    path = os.path.join(root, args.name or f"{exp.name}-ab{smoke}")
+    wanted = {"command": "ab", "arms": {n: manifest.describe(e, args.test) for n, e, _ in named}}
+    record, _ = manifest.prepare(path, wanted, fresh=args.fresh, smoke=args.test)
+    asked = list(range(args.seeds))
+    batches = seed_batches(record, args.seeds)
+    manifest.write(path, record)  # before Tune starts: an interrupted run is still recorded
     for _, e, _ in named:
         for warning in dict.fromkeys(e.warnings):
             print(f"rllib: warning: {warning}", file=sys.stderr)
+    held = sorted({s for b in batches for s in b["seeds"]} - set(asked))
     print(
         f"rllib ab: {named[1][0]} vs {named[0][0]} on {exp.env}, seeds 0-{args.seeds - 1} "
-        f"({2 * args.seeds} trials), results in {path}",
+        f"({2 * args.seeds} trials), results in {path}"
+        + (f" (it also holds seeds {_ranges(held)}, not compared)" if held else ""),
         flush=True,
     )
+    if args.test:
+        print("rllib ab: --test is a smoke run: too short to learn, no verdict", flush=True)
     if check:
         print(check, flush=True)
     os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
     started = start_ray(None, max(required_cpus(c) for _, _, c in named))
+    env_names.register_env(exp.env)
     try:
-        results = fit(args, named, path, trainable)
+        results = []
+        for batch in batches:
+            seeds = [s for s in batch["seeds"] if s in asked]
+            if seeds:
+                where = os.path.join(path, batch["dir"]) if batch["dir"] else path
+                grid = fit(args, named, where, batch["seeds"], trainable)
+                results += [r for r in grid if _seed_of(r) in seeds]
         problems = evaluate_trials(results, args.episodes)
     finally:
         if started:
@@ -353,8 +399,16 @@ def run(args: argparse.Namespace) -> int:
     for p in problems:
         print(f"rllib ab: {p}", file=sys.stderr)
     try:
-        print(write_outputs(path, named[0][0]), end="")
+        print(write_outputs(path, named[0][0], [str(r.path) for r in results]), end="")
     except ValueError as e:
         print(f"rllib ab: error: {e}", file=sys.stderr)
         return 1
     return 1 if problems else 0
+
+
+def _seed_of(result: Any) -> Any:
+    return (result.config or {}).get("seed")
+
+
+def _ranges(seeds: list[int]) -> str:
+    return ", ".join(str(s) for s in seeds)

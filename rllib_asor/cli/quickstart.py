@@ -44,6 +44,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--test", action="store_true", help="smoke run: the --test budget and 100-step episodes"
     )
+    parser.add_argument(
+        "--fresh",
+        action="store_true",
+        help="train again: an earlier run's folder is renamed NAME.replaced-TIME (a rerun "
+        "otherwise keeps the finished run and evaluates it again)",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         stop=None,
         storage_path=args.storage_path,
         resume=False,
+        fresh=args.fresh,
         address=None,
         checkpoint_freq=None,
         keep_checkpoints=None,

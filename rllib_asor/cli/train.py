@@ -7,9 +7,9 @@ import os
 import sys
 from typing import Any
 
-from rllib_asor.cli import experiment
+from rllib_asor.cli import experiment, manifest
 from rllib_asor.cli.errors import UsageError
-from rllib_asor.report.results import RUN_KEY
+from rllib_asor.report.results import RUN_KEY, SMOKE_KEY
 
 DEFAULT_STORAGE = "~/ray_results"
 
@@ -41,7 +41,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--storage-path", help=f"results root (default {DEFAULT_STORAGE})")
     parser.add_argument(
-        "--resume", action="store_true", help="resume the experiment found under the storage path"
+        "--resume",
+        action="store_true",
+        help="resume the experiment found under the storage path (a rerun of the same "
+        "experiment resumes anyway; this one refuses to start a new run)",
+    )
+    parser.add_argument(
+        "--fresh",
+        action="store_true",
+        help="start over: a folder holding this experiment's name is renamed NAME.replaced-TIME",
     )
     parser.add_argument("--address", help="join a running Ray cluster (HOST:PORT or auto)")
     parser.add_argument(
@@ -112,9 +120,16 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
     """Validate every experiment (UsageError on bad input), run each with Tune and stop the
     Ray this call started (so no worker output follows); each experiment's ResultGrid."""
     stop = experiment.parse_stop_flags(args.stop)
+    if args.resume and (args.fresh or args.test):
+        raise UsageError(
+            "--resume continues a real run; allowed without --fresh and --test (smoke runs "
+            "start over)"
+        )
     exps = load_experiments(args)
     configs = []
     for exp in exps:
+        if args.test and not args.name:
+            exp.name += manifest.SMOKE_SUFFIX  # smoke runs never share a folder with real runs
         experiment.check_file(exp)  # as written, before --test/--stop replace anything
         experiment.apply_overrides(
             exp,
@@ -125,13 +140,12 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
             keep_checkpoints=args.keep_checkpoints,
         )
         configs.append(experiment.validate(exp))
-        if args.resume:
-            _check_resumable(os.path.join(storage_path(args, exp), exp.name))
     if getattr(args, "dry_run", False):
         from rllib_asor.cli.dry_run import print_experiments
 
         print_experiments(exps)
         return []
+    resumes = [_prepare_folder(exp, args) for exp in exps]
     from rllib_asor.cli.cluster import probe, start_ray
 
     if args.address:
@@ -143,7 +157,10 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
     os.environ["RAY_AIR_NEW_OUTPUT"] = "0"
     started = start_ray(args.address, max(experiment.required_cpus(c) for c in configs))
     try:
-        return [(exp, _fit(exp, cfg, args)) for exp, cfg in zip(exps, configs, strict=True)]
+        return [
+            (exp, _fit(exp, cfg, args, resume))
+            for exp, cfg, resume in zip(exps, configs, resumes, strict=True)
+        ]
     finally:
         if started:
             import ray
@@ -163,16 +180,33 @@ def _max_concurrent(algo_config: Any) -> int | None:
     return max(1, int(cpus // experiment.required_cpus(algo_config)))
 
 
-def _check_resumable(path: str) -> None:
+def _prepare_folder(exp: experiment.Experiment, args: argparse.Namespace) -> bool:
+    """Check the experiment folder against what would run now (`rllib_asor.cli.manifest`) and
+    record it; True when the Tune experiment in it is resumed."""
     from ray import tune
 
-    if "://" not in path and not os.path.isdir(path) or not tune.Tuner.can_restore(path):
+    path = os.path.join(storage_path(args, exp), exp.name)
+    if "://" in path:  # remote storage: Tune's own resume, unchecked
+        if args.resume and not tune.Tuner.can_restore(path):
+            raise UsageError(f"no previous run to resume at {path}", key="--resume")
+        return bool(args.resume)
+    if args.resume and not tune.Tuner.can_restore(path):
         raise UsageError(
             f"no previous run to resume at {path} (train once without --resume)", key="--resume"
         )
+    wanted = manifest.describe(exp, smoke=args.test)
+    if args.resume and manifest.read(path) is None:
+        print(f"rllib: warning: {path} holds no record of what was run; resumed unchecked, as "
+              "--resume asks", file=sys.stderr)  # fmt: skip
+        manifest.write(path, wanted)
+        return True
+    _, same = manifest.prepare(path, wanted, fresh=args.fresh, smoke=args.test)
+    return same and tune.Tuner.can_restore(path)
 
 
-def _fit(exp: experiment.Experiment, algo_config: Any, args: argparse.Namespace) -> Any:
+def _fit(
+    exp: experiment.Experiment, algo_config: Any, args: argparse.Namespace, resume: bool
+) -> Any:
     """Run one experiment with Tune; its ResultGrid."""
     from ray import tune
 
@@ -183,13 +217,19 @@ def _fit(exp: experiment.Experiment, algo_config: Any, args: argparse.Namespace)
     trainable = _trainable(exp)
     space = experiment.param_space(exp, algo_config)
     space[RUN_KEY] = exp.run  # the method label of `rllib report` (rllib_asor.report.results)
+    if args.test:
+        space[SMOKE_KEY] = True  # `rllib compare` gives smoke runs no verdict
     root = storage_path(args, exp)
     print(
         f"rllib: {exp.name}: {exp.run} on {exp.env}, {exp.num_trials} trial(s), "
         f"stop {exp.stop}, results in {os.path.join(root, exp.name)}",
         flush=True,
     )
-    if args.resume:
+    if resume:
+        print(
+            f"rllib: {exp.name}: resuming (finished trials are kept; --fresh starts over)",
+            flush=True,
+        )
         restore = dict(trainable=trainable, resume_unfinished=True, resume_errored=True)
         path = os.path.join(root, exp.name)
         try:

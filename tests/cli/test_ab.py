@@ -128,6 +128,20 @@ def test_ab_on_a_users_env_with_changing_dynamics(
     assert main(argv) == 0
     assert "resuming" in capsys.readouterr().out
     assert [(t / "evaluation.json").stat().st_mtime_ns for t in trials] == before
+    # More seeds: only the new seed trains (its own Tune experiment in the folder); the old
+    # trials and their evaluations are kept, the comparison has three pairs.
+    assert main([*argv[:3], "3", *argv[4:]]) == 0
+    out = capsys.readouterr().out
+    assert "| PPO+ASOR | PPO | 3 |" in out
+    now = sorted(p.parent for p in exp.rglob("result.json"))
+    assert len(now) == 6 and set(trials) <= set(now)
+    assert [(t / "evaluation.json").stat().st_mtime_ns for t in trials] == before
+    # The same name with a changed setting is refused, naming the change and the ways out.
+    write_yaml(YAML.replace("num_epochs: 1", "num_epochs: 2"), "varpole.yaml")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "num_epochs: 1 -> 2" in err and "--name" in err and "--fresh" in err
+    assert len(list(exp.rglob("result.json"))) == 6
 
 
 def test_ab_bad_input_is_one_line(

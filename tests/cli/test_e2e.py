@@ -66,7 +66,7 @@ def cartpole(tmp_path_factory, cli_ray) -> SimpleNamespace:
     path.write_text(LEGACY_CARTPOLE)
     storage = root / "results"
     res = run_cli(["train", "file", str(path), "--test", "--storage-path", str(storage)])
-    res.yaml, res.storage, res.exp_dir = str(path), storage, storage / "cartpole-legacy"
+    res.yaml, res.storage, res.exp_dir = str(path), storage, storage / "cartpole-legacy-test"
     return res
 
 
@@ -113,22 +113,13 @@ def test_evaluate_finds_latest_checkpoint_in_experiment_dir(cartpole):
     assert "seed: 1000000 (the default: the seed rllib ab evaluates with)" in res.out
 
 
-def test_resume_finished_experiment_exits_0_without_new_trials(cartpole):
-    before = trial_dirs(cartpole.exp_dir)
-    res = run_cli(
-        [
-            "train",
-            "file",
-            cartpole.yaml,
-            "--test",
-            "--storage-path",
-            str(cartpole.storage),
-            "--resume",
-        ]
-    )
-    assert res.rc == 0, res.err[-2000:]
-    assert trial_dirs(cartpole.exp_dir) == before
-    assert last_result(before[0])["training_iteration"] == 2
+def test_test_run_rerun_starts_its_smoke_folder_over_and_refuses_resume(cartpole):
+    """A --test run is a smoke run in NAME-test: it is not resumed (real runs are:
+    tests/cli/test_experiment_folder.py)."""
+    argv = ["train", "file", cartpole.yaml, "--test", "--storage-path", str(cartpole.storage)]
+    res = run_cli([*argv, "--resume"])
+    assert res.rc == 2 and "smoke runs start over" in res.err
+    assert [p.name for p in cartpole.storage.iterdir()] == ["cartpole-legacy-test"]
 
 
 def test_asor_lava_example_test_run_reports_asor_metrics(tmp_path, cli_ray):
@@ -144,7 +135,7 @@ def test_asor_lava_example_test_run_reports_asor_metrics(tmp_path, cli_ray):
         ]
     )
     assert res.rc == 0, res.err[-3000:]
-    [trial] = trial_dirs(tmp_path / "lava-ppo-asor")
+    [trial] = trial_dirs(tmp_path / "lava-ppo-asor-test")
     assert trial.name.startswith("AsorPPO_")
     params = json.loads((trial / "params.json").read_text())  # the trial's resolved param space
     assert params["asor"] == {"mode": "asor"}  # the robust default

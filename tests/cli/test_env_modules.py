@@ -143,7 +143,7 @@ def trained(folder) -> Path:
                    "--num-env-runners", "1", "--storage-path", str(results)], env, root)  # fmt: skip
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     assert "1 trial(s), 0 errored" in proc.stdout
-    return results / "point"
+    return results / "point-test"
 
 
 def test_train_and_evaluate_from_the_modules_folder(folder, trained):

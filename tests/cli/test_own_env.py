@@ -94,7 +94,7 @@ def test_own_env_by_module_and_id_trains_with_test_and_is_evaluated(user):
                    "--num-env-runners", "1", "--storage-path", str(results)], env, root / "work")
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     assert "1 trial(s), 0 errored" in proc.stdout
-    ev = _rllib(["evaluate", str(results / "own-env"), "--episodes", "3"], env, root / "work")
+    ev = _rllib(["evaluate", str(results / "own-env-test"), "--episodes", "3"], env, root / "work")
     assert ev.returncode == 0, (ev.stdout + ev.stderr)[-3000:]
     assert "Traceback" not in ev.stderr
     assert "dynamics" in ev.stdout.lower()

@@ -12,7 +12,7 @@ from tests.cli.test_e2e import run_cli
 def test_quickstart_smoke_trains_evaluates_reports_and_records(tmp_path, cli_ray):
     res = run_cli(["quickstart", "--test", "--episodes", "1", "--storage-path", str(tmp_path)])
     assert res.rc == 0, res.err[-3000:]
-    report = tmp_path / "race-quickstart" / "report"
+    report = tmp_path / "race-quickstart-test" / "report"
     evaluation = json.loads((report / "race_eval.json").read_text())
     assert sorted(evaluation["per_map"], key=int) == [str(m) for m in range(10)]
     assert len(evaluation["episodes"]) == 10  # one unseen course per map

@@ -117,7 +117,7 @@ def test_cli_train_address_joins_the_running_cluster(cluster, tmp_path):
     # The CLI's driver was a job of this cluster.
     new_jobs = [j for j in ray._private.state.jobs() if j["JobID"] not in jobs_before]
     assert any(str(j.get("DriverPid")) == str(proc.pid) for j in new_jobs), new_jobs
-    [trial] = [p for p in (tmp_path / "lava-ppo-asor").iterdir() if p.is_dir()]
+    [trial] = [p for p in (tmp_path / "lava-ppo-asor-test").iterdir() if p.is_dir()]
     assert any(trial.glob("checkpoint_*/rllib_checkpoint.json"))
 
 

@@ -94,7 +94,7 @@ def test_sac_asor_hopper_test_run_reports_asor_metrics(tmp_path, ray_session):
          *LOCAL_SAMPLING]
     )
     assert rc == 0, err[-3000:]
-    trial, result = _last_result(tmp_path / "res/hopper-sac-asor")
+    trial, result = _last_result(tmp_path / "res/hopper-sac-asor-test")
     assert trial.name.startswith("AsorSAC_")
     assert result["training_iteration"] == 2
     _assert_asor_metrics(result)
@@ -113,7 +113,7 @@ def test_highway_ppo_asor_test_run_reports_asor_metrics(tmp_path, ray_session):
          *LOCAL_SAMPLING]
     )
     assert rc == 0, err[-3000:]
-    trial, result = _last_result(tmp_path / "res/highway-ppo-asor")
+    trial, result = _last_result(tmp_path / "res/highway-ppo-asor-test")
     assert trial.name.startswith("AsorPPO_")
     assert result["training_iteration"] == 2
     assert result["num_env_steps_sampled_lifetime"] >= 512

@@ -74,7 +74,7 @@ def test_ppo_asor_example_test_run_reports_asor_and_race_metrics(tmp_path, ray_s
             ]
         )
     assert rc == 0, err.getvalue()[-3000:]
-    [trial] = [p for p in (tmp_path / "race-ppo-asor").iterdir() if p.is_dir()]
+    [trial] = [p for p in (tmp_path / "race-ppo-asor-test").iterdir() if p.is_dir()]
     assert trial.name.startswith("AsorPPO_game_env_ObstacleRace-v0")
     lines = (trial / "result.json").read_text().strip().splitlines()
     result = json.loads(lines[-1])

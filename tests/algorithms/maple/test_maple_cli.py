@@ -94,4 +94,4 @@ def test_maple_asor_example_runs_with_test_stand_in_data(ray_session, tmp_path, 
         ]
     )
     assert rc == 0, capsys.readouterr().err
-    assert list(tmp_path.glob("maple-asor-hopper/*/checkpoint_*"))
+    assert list(tmp_path.glob("maple-asor-hopper-test/*/checkpoint_*"))
