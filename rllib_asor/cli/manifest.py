@@ -108,7 +108,7 @@ def holds_results(path: str) -> bool:
 
 def refuse_changed(path: str, held: Mapping[str, Any], wanted: Mapping[str, Any]) -> None:
     """UsageError naming every difference between `held` and `wanted` (None when equal)."""
-    diffs = differences(held, wanted)
+    diffs = _per_arm(differences(held, wanted), {**held, **wanted}.get("arms") or {})
     if not diffs:
         return
     shown = "; ".join(diffs[:MAX_SHOWN])
@@ -116,6 +116,20 @@ def refuse_changed(path: str, held: Mapping[str, Any], wanted: Mapping[str, Any]
     raise UsageError(
         f"holds a different experiment: {shown}{more}; {ways_out()}", source=path
     )
+
+
+def _per_arm(diffs: list[str], arms: Mapping[str, Any]) -> list[str]:
+    """`rllib ab`'s differences: ``arms.<label>.key`` as ``key`` when every arm has it, else as
+    ``<label>: key``."""
+    out: dict[str, set[str]] = {}
+    for d in diffs:
+        label = next((a for a in arms if d.startswith(f"arms.{a}.")), None)
+        rest = d[len(f"arms.{label}.") :] if label else d
+        out.setdefault(rest, set()).add(label or "")
+    return [
+        d if labels == set(arms) or labels == {""} else f"{', '.join(sorted(labels))}: {d}"
+        for d, labels in out.items()
+    ]
 
 
 def refuse_unrecorded(path: str) -> None:

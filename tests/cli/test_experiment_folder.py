@@ -118,3 +118,17 @@ def test_test_runs_go_to_their_own_folder_marked_smoke(tmp_path: Path, cli_ray: 
     resumed = run_cli(["train", "file", str(path), "--test", "--resume", "--storage-path",
                        str(store)])  # fmt: skip
     assert resumed.rc == 2 and "smoke runs" in resumed.err
+
+
+def test_ab_differences_are_named_once_for_both_arms_and_per_arm_otherwise(tmp_path) -> None:
+    arm = {"config": {"lr": 0.0003}, "asor": None}
+    held = {"command": "ab", "arms": {"PPO": arm, "PPO+ASOR": {**arm, "asor": {"lambda_": 0.1}}}}
+    manifest.write(str(tmp_path), held)
+    wanted = {"command": "ab", "arms": {
+        "PPO": {**arm, "config": {"lr": 0.001}},
+        "PPO+ASOR": {"config": {"lr": 0.001}, "asor": {"lambda_": 0.3}}}}  # fmt: skip
+    with pytest.raises(UsageError) as e:
+        manifest.prepare(str(tmp_path), wanted, fresh=False, smoke=False)
+    text = str(e.value)
+    assert "config.lr: 0.0003 -> 0.001;" in text and "arms." not in text
+    assert "PPO+ASOR: asor.lambda_: 0.1 -> 0.3" in text
