@@ -9,11 +9,36 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from rllib_asor.report.grouping import Group, differing_settings, group_trials, trial_seed
+from rllib_asor.report.grouping import (
+    Group,
+    arm_account,
+    differing_settings,
+    group_trials,
+    trial_seed,
+)
 from rllib_asor.report.health import group_health
-from rllib_asor.report.paired import CI_METHOD, Paired, paired_difference
-from rllib_asor.report.results import Trial, asor_mode, find_trials
-from rllib_asor.report.scores import Source, choose_source, dynamics_scores, score
+from rllib_asor.report.paired import (
+    ALPHA,
+    CI_METHOD,
+    MIN_EPISODES,
+    Paired,
+    adjust_dynamics,
+    decided,
+    paired_difference,
+)
+from rllib_asor.report.readiness import withheld
+from rllib_asor.report.results import SMOKE_LABEL, Trial, asor_mode, find_trials, is_smoke
+from rllib_asor.report.scores import (
+    EVALUATIONS,
+    TRAIN_KEY,
+    Source,
+    choose_source,
+    dynamics_episodes,
+    dynamics_scores,
+    has_score,
+    score,
+    seen_dynamics,
+)
 
 
 @dataclass
@@ -73,13 +98,80 @@ def _scores(group: Group, source: Source, last_n: int, notes: list[str]) -> dict
     return out
 
 
-def _dynamics(group: Group, source: Source, last_n: int) -> dict[str, dict]:
-    out: dict[str, dict] = {}
+def _dynamics(group: Group, source: Source, last_n: int) -> tuple[dict, dict]:
+    """Per dynamics id: {seed: score} and {seed: episodes behind it} (where recorded)."""
+    scores: dict[str, dict] = {}
+    episodes: dict[str, dict] = {}
     for t in group.trials:
         seed = trial_seed(t)
+        if seed is None or any(seed in v for v in scores.values()):
+            continue  # no seed, or a seed twice (noted by `_scores`): as the overall row
+        counts = dynamics_episodes(t, source, last_n)
         for did, value in dynamics_scores(t, source, last_n).items():
-            out.setdefault(did, {}).setdefault(seed, value)
-    return out
+            scores.setdefault(did, {})[seed] = value
+            if did in counts:
+                episodes.setdefault(did, {})[seed] = counts[did]
+    return scores, episodes
+
+
+def _counts(episodes: dict, seeds: list) -> tuple[int | None, int | None]:
+    """(total, fewest per trial) of the paired seeds' episode counts; None where unrecorded."""
+    got = [episodes[s] for s in seeds if s in episodes]
+    if not got or len(got) < len(seeds):
+        return None, None
+    return sum(got), min(got)
+
+
+def _unevaluated(source: Source, groups: list[Group], evaluated: set[str]) -> list[str]:
+    """Dynamics in the groups' training episodes that no evaluation of theirs has."""
+    if source.kind not in EVALUATIONS:
+        return []
+    seen = {d for g in groups for t in g.trials for d in seen_dynamics(t, TRAIN_KEY)}
+    return sorted(seen - evaluated, key=_natural)
+
+
+def _left_out(env: str, source: Source, trials: list[Trial], notes: list[str]) -> None:
+    """One note naming the trials that lack the (evaluation) score the others have."""
+    if source.kind not in EVALUATIONS:
+        return
+    lacking = [t for t in trials if not has_score(t, source)]
+    if lacking:
+        names = ", ".join(f"{t.path.parent.name}/{t.path.name}" for t in lacking)
+        notes.append(
+            f"{env}: {len(lacking)} trial(s) left out for lacking evaluations (the others are "
+            f"scored by their {source.kind} return, never mixed with training returns): {names}"
+        )
+
+
+def _compare_dynamics(
+    res: Paired, base: Group, treat: Group, dyn: tuple, source: Source, last_n: int
+) -> list[Paired]:
+    """The per-dynamics rows of one comparison, Holm-adjusted together; sets `res`'s lists of
+    dynamics evaluated in one arm only or in training only."""
+    (base_dyn, base_eps), (treat_dyn, treat_eps) = dyn, _dynamics(treat, source, last_n)
+    kw = dict(baseline_name=base.label, treatment_name=treat.label, metric=source.key)
+    rows = []
+    for did in sorted(base_dyn.keys() & treat_dyn.keys(), key=_natural):
+        try:
+            d = paired_difference(base_dyn[did], treat_dyn[did], **kw)
+        except ValueError:
+            continue
+        d.env, d.dynamics, d.differs_in, d.arms = res.env, did, res.differs_in, res.arms
+        d.withheld, d.smoke = res.withheld, res.smoke
+        if d.withheld is not None:
+            d.verdict, d.pairs_needed = d.withheld, None
+        d.baseline_episodes, d.baseline_min_episodes = _counts(base_eps.get(did, {}), d.seeds)
+        d.treatment_episodes, d.treatment_min_episodes = _counts(treat_eps.get(did, {}), d.seeds)
+        rows.append(d)
+    adjust_dynamics(rows)
+    for g, mine, other in ((base, base_dyn, treat_dyn), (treat, treat_dyn, base_dyn)):
+        only = sorted(mine.keys() - other.keys(), key=_natural)
+        if only:
+            res.dynamics_one_arm[g.label] = only
+    res.dynamics_training_only = _unevaluated(
+        source, [base, treat], base_dyn.keys() | treat_dyn.keys()
+    )
+    return rows
 
 
 def compare(
@@ -93,7 +185,15 @@ def compare(
     trials = load_trials(results_dirs, notes)
     groups = group_trials(trials)
     comp = Comparison(groups=groups, sources={}, results=[], notes=notes)
-    for env in sorted({g.env for g in groups}):
+    envs = {g.env for g in groups}
+    for env in sorted(
+        e for e in envs if e.endswith(SMOKE_LABEL) and e[: -len(SMOKE_LABEL)] in envs
+    ):
+        notes.append(
+            f"{env[: -len(SMOKE_LABEL)]}: smoke runs (--test) and real runs found together: "
+            f"compared apart, the smoke runs under {env!r} with no verdict"
+        )
+    for env in sorted(envs):
         mine = [g for g in groups if g.env == env]
         if len(mine) < 2:
             notes.append(f"{env}: one group only ({mine[0].label!r}), nothing to compare")
@@ -101,10 +201,13 @@ def compare(
         base = pick_baseline(groups, env, baseline)
         inert = {g.label: group_health(g.label, [t.rows for t in g.trials]) for g in mine}
         comp.health[env] = [line for line in inert.values() if line]
-        source = choose_source([t for g in mine for t in g.trials], metric)
+        every = [t for g in mine for t in g.trials]
+        source = choose_source(every, metric)
         comp.sources[env] = source
+        _left_out(env, source, every, notes)
         base_scores = _scores(base, source, last_n, notes)
         base_dyn = _dynamics(base, source, last_n)
+        smoke = any(is_smoke(t.params) for t in every)
         for g in mine:
             if g is base:
                 continue
@@ -115,16 +218,13 @@ def compare(
                 notes.append(f"{env}: {e} (with a finite score); not compared")
                 continue
             res.env, res.differs_in = env, differing_settings(base, g)
+            res.arms = arm_account(base, g, res.differs_in)
             res.asor_health = inert[g.label]
+            res.smoke, res.withheld = smoke, withheld([base, g], smoke)
+            if res.withheld is not None:
+                res.verdict, res.pairs_needed = res.withheld, None
             comp.results.append(res)
-            treat_dyn = _dynamics(g, source, last_n)
-            for did in sorted(base_dyn.keys() & treat_dyn.keys(), key=_natural):
-                try:
-                    dres = paired_difference(base_dyn[did], treat_dyn[did], **kw)
-                except ValueError:
-                    continue
-                dres.env, dres.dynamics, dres.differs_in = env, did, res.differs_in
-                comp.results.append(dres)
+            comp.results += _compare_dynamics(res, base, g, base_dyn, source, last_n)
     if not comp.results:
         raise ValueError(
             "nothing to compare: "
@@ -176,24 +276,67 @@ def render_text(comp: Comparison) -> str:
             out.append(_row(r, r.treatment))
         out.append("")
         for r in main:
-            out.append(f"{r.treatment} vs {r.baseline} (differs in: {', '.join(r.differs_in)}): "
-                       f"{r.verdict}")  # fmt: skip
+            out.append(f"{r.treatment} vs {r.baseline} ({r.arms}): {r.verdict}")
         out += comp.health.get(env, [])
         dyn = [r for r in comp.results if r.env == env and r.dynamics is not None]
         if dyn:
             out += [
                 "",
-                "per dynamics_id:",
+                "per dynamics_id (episodes: the evaluation episodes behind the paired scores, "
+                "baseline / treatment; min: the fewest behind one trial's score):",
                 "",
-                "| dynamics | treatment | pairs | baseline mean | treatment mean | diff | 95% CI "
-                "| p | P(better) | IQM base / treat |",
-                "|---|---|---|---|---|---|---|---|---|---|",
+                "| dynamics | treatment | pairs | episodes | min per trial | baseline mean "
+                "| treatment mean | diff | 95% CI | p | Holm p | P(better) | decided |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
             ]
-            out += [_row(r, f"{r.dynamics} | {r.treatment}") for r in dyn]
+            out += [_dynamics_row(r) for r in dyn]
+            out += [
+                "",
+                f"decided: the Holm-adjusted p (Holm–Bonferroni over the dynamics of one "
+                f"comparison) < {ALPHA:g} and the 95% interval excludes 0; other rows are "
+                f"exploratory; few: fewer than {MIN_EPISODES} evaluation episodes behind a "
+                "trial's score",
+            ]
+        for r in main:
+            lines = _missing_dynamics(r, comp.sources[env])
+            if lines:
+                out.append(f"{r.treatment} vs {r.baseline}: {lines}")
         out.append("")
     if comp.notes:
         out += ["notes:"] + [f"- {n}" for n in comp.notes]
     return "\n".join(out).rstrip() + "\n"
+
+
+def _pair(a: int | None, b: int | None) -> str:
+    return "n/a" if a is None or b is None else f"{a} / {b}"
+
+
+def _dynamics_row(r: Paired) -> str:
+    few = " (few)" if r.few_episodes else ""
+    state = "no verdict" if r.withheld else "decided" if decided(r) else "exploratory"
+    cells = [r.dynamics or "", r.treatment, str(r.pairs),
+             _pair(r.baseline_episodes, r.treatment_episodes),
+             _pair(r.baseline_min_episodes, r.treatment_min_episodes) + few,
+             _f(r.baseline_mean), _f(r.treatment_mean), f"{r.diff_mean:+.4g}",
+             f"[{_f(r.ci_low)}, {_f(r.ci_high)}]", _f(r.p_value), _f(r.p_adjusted),
+             _f(r.prob_improvement), state]  # fmt: skip
+    return "| " + " | ".join(cells) + " |"
+
+
+def _missing_dynamics(r: Paired, source: Source) -> str:
+    """The dynamics of a comparison that one arm (or every evaluation) lacks, in one line."""
+    parts = [
+        f"{did} (evaluated in {label} only)"
+        if source.kind in EVALUATIONS
+        else f"{did} ({label} only)"
+        for label, ids in r.dynamics_one_arm.items()
+        for did in ids
+    ]
+    parts += [f"{did} (in training, in no evaluation)" for did in r.dynamics_training_only]
+    if not parts:
+        return ""
+    what = "evaluation episodes" if source.kind in EVALUATIONS else "episodes in both arms"
+    return f"dynamics without {what}: {', '.join(parts)}"
 
 
 def _row(r: Paired, head: str) -> str:

@@ -15,7 +15,14 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from rllib_asor.report.results import Trial, asor_block, assign_groups
+from rllib_asor.report.results import (
+    RUN_KEY,
+    SMOKE_KEY,
+    Trial,
+    asor_block,
+    asor_mode,
+    assign_groups,
+)
 
 SEED_NAMES = frozenset({"seed"})
 """Last component of a params key that holds a seed (``seed``, ``env_config.seed``, ...)."""
@@ -23,10 +30,27 @@ SEED_NAMES = frozenset({"seed"})
 ARM_KEY = "rllib_asor_arm"
 """Params key with which `rllib ab` names each arm; when present it is the group's label."""
 
-IGNORED_KEYS = frozenset({"rllib_asor_run"})
-"""Keys that never define a group by themselves (the algorithm is in the method label)."""
+IGNORED_KEYS = frozenset({RUN_KEY, ARM_KEY, SMOKE_KEY})
+"""Bookkeeping keys: they never define a group nor show in ``differs in`` (the algorithm and the
+arm are the group's label, a smoke run its env's label)."""
+
+CALLBACKS_KEY = "callbacks"
+METRICS_ONLY_CALLBACKS = frozenset(
+    {
+        "rllib_asor.rllib.callbacks.AsorMetricsCallback",
+        "rllib_asor.rllib.callbacks.DropNaNLearnerStatsCallback",
+        "rllib_asor.evaluation.dynamics.DynamicsReturnsCallback",
+        "ray.rllib.callbacks.callbacks.RLlibCallback",
+    }
+)
+"""Callbacks that only add metrics (or, RLlib's bare default, do nothing): trials that differ in
+them alone are the same method (`rllib_asor.rllib.wiring.METRICS_CALLBACKS` and the per-dynamics
+returns callback `rllib ab` adds)."""
 
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
+_CLASS = re.compile(r"<class '([\w.]+)'>")
+_DOTTED = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)+$")
+_QUALIFIED = re.compile(r"\b(?:[A-Za-z_]\w*\.)+([A-Z]\w*)\b")
 _MISSING = "<missing>"
 _LABEL_VALUE_CHARS = 40
 
@@ -74,7 +98,24 @@ def trial_settings(params: dict[str, Any]) -> dict[str, str]:
         params["learner_config_dict"] = {k: v for k, v in lcd.items() if k != "asor"}
     if block is not None:
         params["asor"] = block
+    if CALLBACKS_KEY in params:
+        kept = [c for c in callback_names(params[CALLBACKS_KEY]) if c not in METRICS_ONLY_CALLBACKS]
+        params[CALLBACKS_KEY] = kept or None
     return dict(flat_params(params))
+
+
+def callback_names(value: Any) -> list[str]:
+    """The callback classes in a params ``callbacks`` value (one or a list; Tune writes classes as
+    ``<class 'pkg.mod.Name'>``, a YAML file as ``pkg.mod.Name``) as dotted names; other values
+    (a function's repr, ...) as they are."""
+    out = []
+    for item in value if isinstance(value, list | tuple) else [value]:
+        if item is None:
+            continue
+        text = str(item)
+        found = _CLASS.fullmatch(text)
+        out.append(found.group(1) if found else text)
+    return out
 
 
 def is_seed_key(key: str) -> bool:
@@ -93,13 +134,23 @@ def trial_seed(trial: Trial) -> Any:
     return None
 
 
-def _short_value(text: str) -> str:
+def short_value(text: str, limit: int = _LABEL_VALUE_CHARS) -> str:
+    """A setting's value (canonical JSON) as labels show it: classes by their name, and when
+    longer than `limit`, cut after the last whole word that fits (``…``), never inside a name."""
     try:
         value = json.loads(text)
     except json.JSONDecodeError:
         value = text
     shown = value if isinstance(value, str) else json.dumps(value)
-    return shown if len(shown) <= _LABEL_VALUE_CHARS else shown[: _LABEL_VALUE_CHARS - 1] + "…"
+    shown = _QUALIFIED.sub(r"\1", _CLASS.sub(r"\1", shown))
+    if len(shown) <= limit:
+        return shown
+    cut = shown[: limit - 1]
+    if shown[limit - 1].isalnum() or shown[limit - 1] == "_":  # inside a word: back to its start
+        start = re.search(r"\w*$", cut)
+        cut = cut[: start.start()] if start else cut
+    cut = cut.rstrip(" ,.:;=/-")
+    return cut + "…" if cut.strip("[{(\"' ") else shown
 
 
 def varying_keys(trials: Iterable[Trial]) -> list[str]:
@@ -142,7 +193,7 @@ def group_trials(trials: list[Trial], group_by: str | None = None) -> list[Group
             own = [i for i, _ in enumerate(keys) if len({v[i] for v in variants}) > 1]
             for vals, ts in sorted(variants.items()):
                 # A key the group does not set is left out of its label (listed in `settings`).
-                shown = [f"{keys[i]}={_short_value(vals[i])}" for i in own if vals[i] != _MISSING]
+                shown = [f"{keys[i]}={short_value(vals[i])}" for i in own if vals[i] != _MISSING]
                 label = f"{method} ({', '.join(shown)})" if shown else method
                 for t in ts:
                     t.method = label
@@ -151,7 +202,7 @@ def group_trials(trials: list[Trial], group_by: str | None = None) -> list[Group
                         env=env,
                         label=label,
                         method=method,
-                        settings={k: _short_value(v) for k, v in zip(keys, vals, strict=True)},
+                        settings={k: short_value(v) for k, v in zip(keys, vals, strict=True)},
                         trials=sorted(ts, key=lambda t: str(t.path)),
                     )
                 )
@@ -163,3 +214,21 @@ def differing_settings(a: Group, b: Group) -> list[str]:
     return sorted(
         k for k in a.settings.keys() | b.settings.keys() if a.settings.get(k) != b.settings.get(k)
     )
+
+
+def _runs_asor(g: Group) -> bool:
+    return any(asor_mode(t.params) is not None for t in g.trials)
+
+
+def arm_account(base: Group, treat: Group, differs: list[str]) -> str:
+    """How two groups differ, in `rllib ab`'s words (`rllib_asor.cli.ab.arm_check`): "the arms
+    differ only in ASOR" when one runs ASOR and the other not and nothing else differs,
+    "besides ASOR, the arms differ in: ..." when more does, else "the arms differ in: ..."."""
+    other = [k for k in differs if k != "asor" and not k.startswith("asor.")]
+    if _runs_asor(base) != _runs_asor(treat):
+        if not other:
+            return "the arms differ only in ASOR"
+        return f"besides ASOR, the arms differ in: {', '.join(other)}"
+    if not differs:
+        return "the arms differ in no recorded setting"
+    return f"the arms differ in: {', '.join(differs)}"

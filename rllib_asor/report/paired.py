@@ -9,7 +9,10 @@ weights), so the difference ``d_s = treatment_s - baseline_s`` cancels the seed'
 - probability of improvement P(treatment > baseline) and the IQM of each method
   (`rliable.metrics`, Agarwal et al. 2021), over the paired runs;
 - pairs needed for the observed effect at 80 % power, two-sided 5 %:
-  n ≈ ((z₀.₉₇₅ + z₀.₈) · sd(d) / mean(d))².
+  n ≈ ((z₀.₉₇₅ + z₀.₈) · sd(d) / mean(d))²;
+- per ``dynamics_id``: the p-values of one comparison's dynamics adjusted together (`holm`,
+  Holm–Bonferroni); a row is decided (`decided`, the one rule the table and the figure use) only
+  when its adjusted p < 5 % and its interval excludes 0, else it is exploratory.
 
 The studies' tables (studies/lib) take their numbers from here too: `unpaired_difference` (every
 run, seeds pooled: percentile bootstrap of the difference of means and a one-sided Mann–Whitney
@@ -61,16 +64,90 @@ class Paired:
     env: str = ""
     dynamics: str | None = None
     differs_in: list[str] = field(default_factory=list)
+    arms: str = ""
+    """`differs_in` in words, as `rllib ab` says it (`rllib_asor.report.grouping.arm_account`)."""
     diffs: list[float] = field(default_factory=list)
     asor_health: str | None = None
     """One line when the treatment's ASOR looks inert (`rllib_asor.report.health`)."""
+    withheld: str | None = None
+    """Why no verdict is given (smoke run, an arm never trained, ASOR never ran), else None."""
+    smoke: bool = False
+    """The trials are smoke runs (`rllib_asor.report.results.SMOKE_KEY`)."""
+    p_adjusted: float = math.nan
+    """Per dynamics: the Holm-adjusted p over the comparison's dynamics (NaN for the overall row)."""
+    dynamics_compared: int = 0
+    """Per dynamics: how many dynamics the adjustment covered."""
+    baseline_episodes: int | None = None
+    treatment_episodes: int | None = None
+    """Per dynamics: evaluation episodes behind the paired scores, summed over the trials."""
+    baseline_min_episodes: int | None = None
+    treatment_min_episodes: int | None = None
+    """Per dynamics: the fewest episodes behind one trial's score."""
+    dynamics_one_arm: dict[str, list[str]] = field(default_factory=dict)
+    """Overall row: per group, the dynamics only its evaluation has (the other arm has none)."""
+    dynamics_training_only: list[str] = field(default_factory=list)
+    """Overall row: dynamics seen in training but in no evaluation episode."""
+
+    @property
+    def few_episodes(self) -> bool:
+        """Per dynamics: some trial's score rests on fewer than `MIN_EPISODES` episodes."""
+        counts = [
+            c for c in (self.baseline_min_episodes, self.treatment_min_episodes) if c is not None
+        ]
+        return bool(counts) and min(counts) < MIN_EPISODES
 
     def to_json(self) -> dict[str, Any]:
-        """A JSON-able dict (NaN -> None)."""
-        return {
+        """A JSON-able dict (NaN -> None), with `decided` and `few_episodes`."""
+        out = {
             k: (None if isinstance(v, float) and not math.isfinite(v) else v)
             for k, v in asdict(self).items()
         }
+        out["decided"] = decided(self)
+        out["few_episodes"] = self.few_episodes
+        return out
+
+
+MIN_EPISODES = 2
+"""A per-dynamics row whose trials have fewer evaluation episodes than this is flagged ``few``."""
+
+
+def decided(r: Paired) -> bool:
+    """Whether `r` decides: no reason to withhold a verdict, the 95 % interval excludes 0, and
+    p < 5 % (per dynamics: the Holm-adjusted p). The table, the verdict and the figure ask this."""
+    if r.withheld is not None or r.pairs < 2:
+        return False
+    p = r.p_adjusted if r.dynamics is not None else r.p_value
+    return bool(p < ALPHA) and (r.ci_low > 0 or r.ci_high < 0)
+
+
+def holm(p_values: Sequence[float]) -> list[float]:
+    """Holm–Bonferroni adjusted p-values, in the given order; NaNs stay NaN and do not count."""
+    idx = sorted((i for i, p in enumerate(p_values) if math.isfinite(p)), key=lambda i: p_values[i])
+    out = [math.nan] * len(p_values)
+    running = 0.0
+    for rank, i in enumerate(idx):
+        running = max(running, min(1.0, (len(idx) - rank) * p_values[i]))
+        out[i] = running
+    return out
+
+
+def adjust_dynamics(rows: Sequence[Paired]) -> None:
+    """Holm-adjust the per-dynamics rows of one comparison together and set their verdicts."""
+    adjusted = holm([r.p_value for r in rows])
+    for r, p in zip(rows, adjusted, strict=True):
+        r.p_adjusted, r.dynamics_compared = p, len(rows)
+        if r.withheld is not None:
+            continue
+        if decided(r):
+            side = "better" if r.ci_low > 0 else "worse"
+            r.verdict = (
+                f"treatment {side}: the 95% interval excludes 0 and the Holm-adjusted p < "
+                f"{ALPHA:g} (over {len(rows)} dynamics)"
+            )
+        else:  # "no difference observed" and "one pair" still hold; a raw decision does not
+            kept = "" if r.verdict.startswith(("treatment", "too wide")) else f"; {r.verdict}"
+            r.verdict = f"exploratory: Holm-adjusted p {p:.3g} over {len(rows)} dynamics{kept}"
+        r.pairs_needed = None
 
 
 def pairs_needed(diff_mean: float, diff_std: float) -> int | None:
@@ -96,7 +173,7 @@ def _verdict(p: Paired) -> tuple[str, int | None]:
     pairs a bootstrap interval can exclude 0 while no test could (2 pairs: p ≥ 0.5)."""
     if p.pairs < 2:
         return "one pair: no interval; run more seeds", None
-    if p.p_value < ALPHA and (p.ci_low > 0 or p.ci_high < 0):
+    if decided(p):
         side = "better" if p.ci_low > 0 else "worse"
         return f"treatment {side}: the 95% interval excludes 0 and p < {ALPHA:g}", None
     need = pairs_needed(p.diff_mean, p.diff_std)

@@ -5,6 +5,7 @@ the per-seed paired differences, and the returns per ``dynamics_id``. PNGs via m
 from __future__ import annotations
 
 import io
+import textwrap
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -12,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from rllib_asor.report.files import atomic_write
-from rllib_asor.report.paired import Paired
+from rllib_asor.report.paired import ALPHA, Paired, decided
 from rllib_asor.report.results import Trial
 from rllib_asor.report.stats import bootstrap_ci_columns
 
@@ -119,24 +120,33 @@ def plot_paired(result: Paired, path: Path) -> None:
     _save(fig, path)
 
 
-def plot_dynamics(results: Sequence[Paired], path: Path) -> None:
-    """One PNG: per dynamics id, both methods' mean return with the per-seed values."""
+def plot_dynamics(results: Sequence[Paired], path: Path) -> tuple[list[str], str]:
+    """One PNG: per dynamics id, both methods' mean return, labelled with the paired difference
+    and ``*`` where `rllib_asor.report.paired.decided` (the table's rule: Holm-adjusted p < 5 %
+    and the interval excludes 0); returns (the labels, the title)."""
     fig, ax = _figure(max(6.0, 0.9 * len(results) + 2), 4)
-    ids = [str(r.dynamics) for r in results]
+    ids = [f"{r.dynamics} (few)" if r.few_episodes else str(r.dynamics) for r in results]
     pos = np.arange(len(ids))
     for off, name, attr in ((-0.2, results[0].baseline, "baseline"),
                             (0.2, results[0].treatment, "treatment")):  # fmt: skip
         means = [getattr(r, f"{attr}_mean") for r in results]
         ax.bar(pos + off, means, width=0.4, alpha=0.6, label=name)
     ax.set_xticks(pos, ids)
-    ax.set_xlabel("dynamics_id")
+    ax.set_xlabel("dynamics_id  (few: < 2 evaluation episodes behind a trial's score)")
     ax.set_ylabel(results[0].metric or "return")
-    stars = ["*" if r.ci_low > 0 or r.ci_high < 0 else "" for r in results]
-    for p, r, s in zip(pos, results, stars, strict=True):
+    labels = [f"{r.diff_mean:+.3g}{'*' if decided(r) else ''}" for r in results]
+    for p, r, label in zip(pos, results, labels, strict=True):
         top = max(r.baseline_mean, r.treatment_mean)
-        ax.annotate(f"{r.diff_mean:+.3g}{s}", (p, top), ha="center", va="bottom", fontsize=8)
-    ax.set_title("mean return per dynamics (label: paired diff, * = 95% CI excludes 0)",
-                 fontsize="medium")  # fmt: skip
+        ax.annotate(label, (p, top), ha="center", va="bottom", fontsize=8)
+    withheld = next((r.withheld for r in results if r.withheld), None)
+    title = (
+        "mean return per dynamics (label: paired diff); * = decided: Holm-adjusted p < "
+        f"{ALPHA:g} over {len(results)} dynamics and 95% CI excludes 0; others exploratory"
+    )
+    if withheld:
+        title += f"\n{withheld}"
+    ax.set_title(textwrap.fill(title, 90), fontsize="small")
     ax.grid(alpha=0.3, axis="y")
     ax.legend(loc="best", fontsize="small")
     _save(fig, path)
+    return labels, title

@@ -51,6 +51,8 @@ and validates none of them, so the key reaches ``params.json`` without changing 
 SMOKE_KEY = "rllib_asor_smoke"
 """Params key `rllib train --test` and `rllib ab --test` set (True): a smoke run, too short to
 judge; `rllib compare` labels its trials smoke and gives them no verdict."""
+SMOKE_LABEL = " (smoke run)"
+"""Appended to a smoke trial's env, so that smoke and real runs are never grouped together."""
 
 
 @dataclass
@@ -243,11 +245,19 @@ def lookup(params: dict[str, Any], dotted: str) -> Any:
     raise KeyError(dotted)
 
 
+def is_smoke(params: dict[str, Any]) -> bool:
+    """Whether a trial's params mark it a smoke run (`SMOKE_KEY` truthy)."""
+    return bool(params.get(SMOKE_KEY))
+
+
 def assign_groups(trials: Iterable[Trial], group_by: str | None = None) -> None:
-    """Set each trial's ``env`` and ``method`` (``KEY=value`` when `group_by` is given)."""
+    """Set each trial's ``env`` (with `SMOKE_LABEL` for a smoke run) and ``method``
+    (``KEY=value`` when `group_by` is given)."""
     for t in trials:
         env = t.params.get("env")
         t.env = str(env) if env not in (None, "") else "unknown-env"
+        if is_smoke(t.params):
+            t.env += SMOKE_LABEL
         if group_by:
             try:
                 value = lookup(t.params, group_by)

@@ -18,11 +18,13 @@ def write_trial(
     eval_dynamics: dict[str, list[float]] | None = None,
     evaluation: dict[str, Any] | None = None,
     steps_per_iter: int = 1000,
+    extra: dict[str, Any] | None = None,
 ) -> Path:
     """One trial folder `root/name` with one result row per entry of `returns`.
 
     `eval_returns` / `eval_dynamics` (dynamics id -> value per iteration) add the
-    `evaluation/env_runners/...` keys; `evaluation` is written as evaluation.json.
+    `evaluation/env_runners/...` keys; `evaluation` is written as evaluation.json; `extra`
+    adds keys to every row (``a/b`` names nested keys as RLlib reports them).
     """
     tdir = root / name
     tdir.mkdir(parents=True)
@@ -42,6 +44,7 @@ def write_trial(
                         d: {"episode_return_mean": v[i]} for d, v in eval_dynamics.items()
                     }
                 row["evaluation"] = {"env_runners": runners}
+            row.update(extra or {})
             f.write(json.dumps(row) + "\n")
     if evaluation is not None:
         (tdir / "evaluation.json").write_text(json.dumps(evaluation))

@@ -120,7 +120,8 @@ def test_evaluation_returns_are_preferred_and_per_dynamics_rows(tmp_path: Path) 
     main, d0, d1 = comp.results
     assert main.dynamics is None and main.diff_mean == pytest.approx(1.0)  # not -500 (training)
     assert (d0.dynamics, d0.diff_mean, d1.dynamics, d1.diff_mean) == ("0", 2.0, "1", 0.0)
-    assert d1.verdict == "no difference observed" and d1.p_value == 1.0
+    assert d1.p_value == 1.0 and d1.p_adjusted == 1.0
+    assert d1.verdict == "exploratory: Holm-adjusted p 1 over 2 dynamics; no difference observed"
     assert "evaluation return during training" in render_text(comp)
 
 

@@ -118,6 +118,7 @@ def test_a_method_with_rllib_evaluation_keeps_it_beside_a_self_evaluating_one(tm
         maple = {"env": env, "seed": seed, "rllib_asor_run": "MAPLE"}
         maple_trial(tmp_path, f"MAPLE_{seed}", maple, {"return_mean": 3.0})
     _, _, cells, sources = table_cells([tmp_path])
-    assert cells[(env, "SAC")] == [99.0, 99.0]  # the env's common source: training returns
-    assert "env_runners/episode_return_mean" in sources[(env, "SAC")]
+    # the evaluation SAC has, never its training returns because MAPLE lacks RLlib's evaluation
+    assert cells[(env, "SAC")] == [7.0, 7.0]
+    assert "evaluation/env_runners/episode_return_mean" in sources[(env, "SAC")]
     assert cells[(env, "MAPLE")] == [4.0, 4.0]
