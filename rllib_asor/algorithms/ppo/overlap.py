@@ -6,7 +6,10 @@ docs/results.md, race PPO speed), so the runners' cores idle half the time. `Ove
 asks the runners for batch k+1 before it trains on batch k; batch k+1 is therefore sampled with
 the weights of one update earlier (a policy lag of one iteration, as in IMPALA/APPO's learner
 queue, but with PPO's loss unchanged: its clipped ratio is taken against the log-probabilities
-stored at sampling time, so the lag only enlarges the first epoch's ratio a little).
+stored at sampling time). The lag is corrected by default: `rllib_asor.algorithms.ppo.lag` takes
+PPO's ratio against the current weights and weights each row by its truncated importance weight
+(decoupled PPO); `learner_config_dict: {lag_correction: false}` trains on the lagged rows as they
+are.
 
 Switched on per config, it is plain PPO otherwise:
 
@@ -38,6 +41,8 @@ from ray.rllib.utils.metrics import (
     TIMERS,
 )
 
+from rllib_asor.algorithms.ppo.lag import CORRECTION_KEY, WEIGHT_CLIP_KEY, add_correction
+
 OVERLAP_KEY = "overlap_sampling"
 """`learner_config_dict` key that switches the overlap on."""
 _TAG = "overlap_sample"
@@ -64,6 +69,13 @@ def overlap_sampling(config: AlgorithmConfig, enabled: bool = True) -> Algorithm
 class OverlappedPPO(PPO):
     """RLlib's PPO; with `learner_config_dict["overlap_sampling"]` its remote env runners sample
     batch k+1 while the Learner trains on batch k (module docstring)."""
+
+    def setup(self, config: Any) -> None:
+        super().setup(config)
+        lcd = self.config.learner_config_dict or {}
+        if overlap_enabled(self.config) and lcd.get(CORRECTION_KEY, True):
+            clip = float(lcd.get(WEIGHT_CLIP_KEY, 1.0))
+            self.learner_group.foreach_learner(lambda learner: add_correction(learner, clip))
 
     def training_step(self) -> None:
         group = self.env_runner_group
