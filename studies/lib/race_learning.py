@@ -65,6 +65,11 @@ def run_settings(args: argparse.Namespace) -> dict[str, Any]:
         "sampling": getattr(args, "sampling", "local"),
         "model_config": json.loads(model_config) if model_config else {},
         "drop_bootstrap_rows": bool(getattr(args, "drop_bootstrap_rows", False)),
+        "lag_correction": (
+            not getattr(args, "no_lag_correction", False)
+            if getattr(args, "sampling", "local") == "overlap"
+            else None
+        ),
     }
 
 
@@ -101,6 +106,8 @@ def race_config(seed: int, asor: dict[str, Any] | None, args: argparse.Namespace
                 num_env_runners=1, num_envs_per_env_runner=args.envs, num_cpus_per_env_runner=1
             )
         )
+        lcd = {**config.learner_config_dict, "lag_correction": run_settings(args)["lag_correction"]}
+        config = config.learners(learner_config_dict=lcd)
     if run_settings(args)["drop_bootstrap_rows"]:
         from rllib_asor.algorithms.ppo.lean import drop_bootstrap_rows
 
@@ -286,6 +293,11 @@ def main(argv: list[str] | None = None) -> int:
         default="local",
         help="local: sampling in the trial (1 CPU); overlap: one env runner sampling while the "
         "Learner trains (OverlappedPPO, 2 CPUs per trial)",
+    )
+    parser.add_argument(
+        "--no-lag-correction",
+        action="store_true",
+        help="--sampling overlap without the lag correction (rllib_asor.algorithms.ppo.lag)",
     )
     parser.add_argument(
         "--drop-bootstrap-rows",
