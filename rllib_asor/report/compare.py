@@ -282,8 +282,7 @@ def render_text(comp: Comparison) -> str:
         if dyn:
             out += [
                 "",
-                "per dynamics_id (episodes: the evaluation episodes behind the paired scores, "
-                "baseline / treatment; min: the fewest behind one trial's score):",
+                "per dynamics_id:",
                 "",
                 "| dynamics | treatment | pairs | episodes | min per trial | baseline mean "
                 "| treatment mean | diff | 95% CI | p | Holm p | P(better) | decided |",
@@ -292,10 +291,10 @@ def render_text(comp: Comparison) -> str:
             out += [_dynamics_row(r) for r in dyn]
             out += [
                 "",
-                f"decided: the Holm-adjusted p (Holm–Bonferroni over the dynamics of one "
-                f"comparison) < {ALPHA:g} and the 95% interval excludes 0; other rows are "
-                f"exploratory; few: fewer than {MIN_EPISODES} evaluation episodes behind a "
-                "trial's score",
+                "episodes: behind the paired scores, baseline / treatment (min per trial: "
+                f"the fewest behind one trial's score; few: < {MIN_EPISODES}); decided: the "
+                f"Holm-adjusted p (Holm–Bonferroni over the comparison's dynamics) < {ALPHA:g} "
+                "and the 95% interval excludes 0; other rows are exploratory",
             ]
         for r in main:
             lines = _missing_dynamics(r, comp.sources[env])
@@ -313,7 +312,12 @@ def _pair(a: int | None, b: int | None) -> str:
 
 def _dynamics_row(r: Paired) -> str:
     few = " (few)" if r.few_episodes else ""
-    state = "no verdict" if r.withheld else "decided" if decided(r) else "exploratory"
+    if r.withheld:
+        state = "no verdict"
+    elif decided(r):
+        state = f"decided: {'better' if r.ci_low > 0 else 'worse'}"
+    else:
+        state = "exploratory"
     cells = [r.dynamics or "", r.treatment, str(r.pairs),
              _pair(r.baseline_episodes, r.treatment_episodes),
              _pair(r.baseline_min_episodes, r.treatment_min_episodes) + few,

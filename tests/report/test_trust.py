@@ -107,7 +107,27 @@ def test_per_dynamics_p_values_are_holm_adjusted_and_only_those_rows_decided(
     assert "Holm" in text
     row0 = next(line for line in text.splitlines() if line.startswith("| 0 | PPO+ASOR"))
     row1 = next(line for line in text.splitlines() if line.startswith("| 1 | PPO+ASOR"))
-    assert row0.rstrip(" |").endswith("decided") and row1.rstrip(" |").endswith("exploratory")
+    assert row0.endswith("| decided: better |") and row1.endswith("| exploratory |")
+
+
+def test_episode_counts_of_evaluation_during_training(tmp_path: Path) -> None:
+    # DynamicsReturnsCallback's num_episodes is per iteration (a real run: 4, 1, 1, 4 episodes
+    # of dynamics 5, 4, 2, 3 in one iteration, 4, 2, 5, 2 in the next)
+    for s in range(3):
+        for arm, params, shift in (("b", base_params(s), 0.0), ("a", asor_params(s), 1.0)):
+            counts = {"evaluation/env_runners/dynamics/0/num_episodes": 2 + s}
+            if s:  # dynamics 1's count is recorded for seeds 1 and 2 only
+                counts["evaluation/env_runners/dynamics/1/num_episodes"] = 1
+            write_trial(tmp_path, f"{arm}{s}", params, [1.0, 1.0], eval_returns=[5.0, 5.0 + s],
+                        eval_dynamics={"0": [1.0, 2.0 + shift], "1": [3.0, 3.0 + shift]},
+                        extra={**TRAINED, **ASOR_RAN, **counts})  # fmt: skip
+    for last_n, total, fewest in ((1, 9, 2), (2, 18, 4)):
+        comp = compare([tmp_path], last_n=last_n)
+        assert comp.sources[ENV].kind == "evaluation"
+        d0, d1 = (r for r in comp.results if r.dynamics is not None)
+        assert (d0.baseline_episodes, d0.treatment_min_episodes) == (total, fewest)
+        assert d1.baseline_episodes is None and d1.baseline_min_episodes is None
+    assert "| 1 | PPO+ASOR | 3 | n/a | n/a |" in render_text(comp)
 
 
 def test_dynamics_plot_stars_exactly_the_rows_the_table_decides(tmp_path: Path) -> None:
