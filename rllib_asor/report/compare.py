@@ -102,10 +102,12 @@ def _dynamics(group: Group, source: Source, last_n: int) -> tuple[dict, dict]:
     """Per dynamics id: {seed: score} and {seed: episodes behind it} (where recorded)."""
     scores: dict[str, dict] = {}
     episodes: dict[str, dict] = {}
+    seen: set = set()
     for t in group.trials:
         seed = trial_seed(t)
-        if seed is None or any(seed in v for v in scores.values()):
-            continue  # no seed, or a seed twice (noted by `_scores`): as the overall row
+        if seed is None or seed in seen:
+            continue  # no seed, or a seed twice (noted by `_scores`): the first trial, as there
+        seen.add(seed)
         counts = dynamics_episodes(t, source, last_n)
         for did, value in dynamics_scores(t, source, last_n).items():
             scores.setdefault(did, {})[seed] = value
