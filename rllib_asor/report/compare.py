@@ -331,18 +331,17 @@ def _dynamics_row(r: Paired) -> str:
 
 def _missing_dynamics(r: Paired, source: Source) -> str:
     """The dynamics of a comparison that one arm (or every evaluation) lacks, in one line."""
+    evaluated = source.kind in EVALUATIONS
     parts = [
-        f"{did} (evaluated in {label} only)"
-        if source.kind in EVALUATIONS
-        else f"{did} ({label} only)"
+        f"{', '.join(ids)} ({'evaluated in ' if evaluated else ''}{label} only)"
         for label, ids in r.dynamics_one_arm.items()
-        for did in ids
     ]
-    parts += [f"{did} (in training, in no evaluation)" for did in r.dynamics_training_only]
+    if r.dynamics_training_only:
+        parts.append(f"{', '.join(r.dynamics_training_only)} (in training, in no evaluation)")
     if not parts:
         return ""
-    what = "evaluation episodes" if source.kind in EVALUATIONS else "episodes in both arms"
-    return f"dynamics without {what}: {', '.join(parts)}"
+    what = "evaluation episodes" if evaluated else "episodes in both arms"
+    return f"dynamics without {what}: {'; '.join(parts)}"
 
 
 def _row(r: Paired, head: str) -> str:
