@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import Any
 
 ALGOS = ("ppo", "asor")
-PARTS = ("learner", "sample", "e2e", "tune")
+PARTS = ("learner", "sample", "e2e", "tune", "split", "sync")
 LABELS = {"ppo": "PPO", "asor": "PPO+ASOR"}
 
 
@@ -82,9 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", default="cpu", help="the Learner's device: cpu or cuda")
     p.add_argument("--runners", default="1,2,4,8,14", help="env-runner counts (comma list)")
     p.add_argument("--algos", default="ppo,asor", help="comma list of ppo, asor")
-    p.add_argument(
-        "--parts", default="learner,sample,e2e,tune", help="comma list of " + ",".join(PARTS)
-    )
+    p.add_argument("--parts", default=",".join(PARTS), help="comma list of " + ",".join(PARTS))
     p.add_argument("--quick", action="store_true", help="fewer batches and iterations (minutes)")
     p.add_argument("--envs-per-runner", type=int, default=8)
     p.add_argument(
@@ -124,6 +122,10 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="PPO without its masked bootstrap rows (rllib_asor.algorithms.ppo.lean)",
     )
+    p.add_argument(
+        "--sync-runners", type=int, default=8, help="idle runners of the sync part (1 env each)"
+    )
+    p.add_argument("--sync-reps", type=int, default=10, help="timed syncs per variant")
     p.add_argument("--out", default="benchmarks/out/scaling")
     p.add_argument("--learner-job", default=None, help=argparse.SUPPRESS)  # internal: one tree
     return p
@@ -136,7 +138,15 @@ def settle(args: argparse.Namespace) -> argparse.Namespace:
     args.runner_counts = parse_runners(args.runners)
     args.algo_list = parse_list(args.algos, ALGOS, "--algos")
     args.part_list = parse_list(args.parts, PARTS, "--parts")
-    for key in ("envs_per_runner", "rows_per_runner", "minibatch", "epochs", "rounds"):
+    for key in (
+        "envs_per_runner",
+        "rows_per_runner",
+        "minibatch",
+        "epochs",
+        "rounds",
+        "sync_runners",
+        "sync_reps",
+    ):
         if getattr(args, key) < 1:
             raise ValueError(
                 f"--{key.replace('_', '-')} {getattr(args, key)} is invalid: allowed ≥ 1"
@@ -332,7 +342,13 @@ def start_ray(args: argparse.Namespace) -> str | None:
     try:
         import ray
 
-        cpus = max(os.cpu_count() or 1, max(args.runner_counts) + 1, args.trials + 1)
+        # the split builds PPO and PPO+ASOR side by side: a CPU for each of their runners
+        cpus = max(
+            os.cpu_count() or 1,
+            2 * max(args.runner_counts) + 1,
+            args.trials + 1,
+            args.sync_runners + 1 if "sync" in args.part_list else 0,
+        )
         ray.init(
             address="local",
             num_cpus=cpus,
@@ -414,6 +430,268 @@ def measure_tune(algo: str, args: argparse.Namespace) -> float:
             wall = df["time_total_s"]
             total += (steps.iloc[-1] - steps.iloc[0]) / (wall.iloc[-1] - wall.iloc[0])
     return total
+
+
+# ---------------------------------------------------------------------------- the split
+SPLIT_ROWS = (
+    # (key, label, depth): depth 1 rows add up to the iteration's wall time, depth 2 rows to
+    # the depth 1 row above them, depth 3 rows to the depth 2 row above them
+    ("sampling", "sampling (driver's `timers/env_runner_sampling_timer`)", 1),
+    ("runner_sample", "the runner's own `sample()` (`env_runners/sample`)", 2),
+    ("driver_wait", "the driver's wait beyond it: episodes' transfer, runner metrics", 2),
+    ("learner_update", "Learner update (`timers/learner_update_timer`)", 1),
+    ("asor_piece", "Learner connector: ASOR's piece (`asor_reward_connector`)", 2),
+    ("asor_batch", "features, V(s) of the batch (`_asor_batch`, our timer)", 3),
+    ("asor_update", "archive, ranking, bonus, disc/RND batches (`asor_update`, our timer)", 3),
+    ("asor_rest", "rewards written, metrics logged", 3),
+    ("gae", "Learner connector: GAE", 2),
+    ("connector_rest", "Learner connector: the rest (episodes → batch, to torch)", 2),
+    ("update", "update: the minibatches (policy, critic, disc, RND)", 2),
+    ("learner_reduce", "the Learner's metrics reduce (our timer)", 2),
+    ("update_other", "LearnerGroup around it, results aggregated", 2),
+    ("weight_sync", "weight sync to the runners (`timers/synch_weights`)", 1),
+    ("step_other", "rest of `training_step`", 1),
+    ("compile", "metrics compile (`training_iteration` − `training_step`)", 1),
+    ("env_sync", "env-runner connector states (`timers/synch_env_connectors`)", 1),
+    ("results", "results, callbacks (`train()` − `training_iteration`)", 1),
+    ("wall", "iteration, wall clock (`algo.train()`)", 0),
+    ("learner_cpu", "the Learner's `update()` in CPU seconds of the driver (our timer)", 0),
+)
+
+_OWN: dict[str, float] = {}
+"""Our timers of this process's Learners (the Learner is in the driver), summed per
+iteration: read and reset around each `algo.train()`."""
+
+
+def _own_timer(name: str, fn: Any) -> Any:
+    """`fn` wrapped to add its wall time to `_OWN[name]` (after a CUDA sync where torch uses
+    CUDA, so GPU work is counted where it is issued)."""
+    import functools
+
+    import torch
+
+    def sync() -> None:
+        if torch.cuda.is_available() and torch.cuda.is_initialized():
+            torch.cuda.synchronize()
+
+    @functools.wraps(fn)
+    def timed(*a: Any, **kw: Any) -> Any:
+        sync()
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            return fn(*a, **kw)
+        finally:
+            sync()
+            _OWN[name] = _OWN.get(name, 0.0) + time.perf_counter() - t0
+            _OWN[name + "_cpu"] = _OWN.get(name + "_cpu", 0.0) + time.process_time() - c0
+
+    timed.__wrapped_by_scaling__ = True  # type: ignore[attr-defined]
+    return timed
+
+
+def install_own_timers() -> None:
+    """Our timers inside ASOR's Learner-connector piece (idempotent; this process only)."""
+    from rllib_asor.rllib import connector
+
+    if not getattr(connector.asor_update, "__wrapped_by_scaling__", False):
+        connector.asor_update = _own_timer("asor_update", connector.asor_update)
+        cls = connector.AsorRewardConnector
+        cls._asor_batch = _own_timer("asor_batch", cls._asor_batch)
+
+
+def split_config(algo: str, args: argparse.Namespace, runners: int) -> Any:
+    """`race_config` reporting RLlib's timers per iteration (`benchmarks.iteration_stats`)."""
+    from benchmarks.iteration_stats import ITERATION_STATS
+
+    return race_config(algo, args, runners).reporting(custom_stats_cls_lookup=ITERATION_STATS)
+
+
+def _flat(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out |= _flat(v, f"{prefix}{k}/")
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def split_parts(result: dict[str, Any], wall: float, own: dict[str, float]) -> dict[str, float]:
+    """One iteration's parts (seconds, keys of `SPLIT_ROWS`) from its result row (RLlib's
+    timers, per iteration), the driver's wall time around `train()` and our timers."""
+    r = _flat(result)
+
+    def g(key: str) -> float:
+        v = r.get(key)
+        try:
+            v = float(v)
+        except (TypeError, ValueError):
+            return 0.0
+        return 0.0 if v != v else v  # NaN: not logged this iteration
+
+    lc = "learners/__all_modules__/learner_connector/"
+    cn = lc + "timers/connectors/"
+    p = {
+        "wall": wall,
+        "sampling": g("timers/env_runner_sampling_timer"),
+        "runner_sample": g("env_runners/sample"),
+        "learner_update": g("timers/learner_update_timer"),
+        "asor_piece": g(cn + "asor_reward_connector"),
+        "asor_batch": own.get("asor_batch", 0.0),
+        "asor_update": own.get("asor_update", 0.0),
+        "gae": g(cn + "shared_values_gae") + g(cn + "general_advantage_estimation"),
+        "learner_reduce": own.get("learner_reduce", 0.0),
+        "weight_sync": g("timers/synch_weights"),
+        "learner_cpu": own.get("learner_update_call_cpu", 0.0),
+        "env_sync": g("timers/synch_env_connectors"),
+    }
+    pipeline = g(lc + "connector_pipeline_timer")
+    p["driver_wait"] = p["sampling"] - p["runner_sample"]
+    p["asor_rest"] = p["asor_piece"] - p["asor_batch"] - p["asor_update"]
+    p["connector_rest"] = pipeline - p["asor_piece"] - p["gae"]
+    p["update"] = own.get("learner_update_call", 0.0) - pipeline - p["learner_reduce"]
+    p["update_other"] = p["learner_update"] - own.get("learner_update_call", 0.0)
+    step, it = g("timers/training_step"), g("timers/training_iteration")
+    p["step_other"] = step - p["sampling"] - p["learner_update"] - p["weight_sync"]
+    p["compile"] = it - step
+    p["results"] = wall - it - p["env_sync"]
+    return p
+
+
+def measure_split(runners: int, args: argparse.Namespace) -> dict[str, Any]:
+    """PPO and PPO+ASOR built side by side (each with `runners` runners), their iterations
+    interleaved; per iteration the parts of `SPLIT_ROWS` and the env steps sampled."""
+    import torch
+    from ray.rllib.utils.metrics import ENV_RUNNER_RESULTS, NUM_ENV_STEPS_SAMPLED_LIFETIME
+
+    torch.set_num_threads(args.learner_threads)
+    install_own_timers()
+    algos = {a: split_config(a, args, runners).build_algo() for a in args.algo_list}
+    for algorithm in algos.values():  # our timers around the (local) Learner's calls
+        learner = algorithm.learner_group._learner
+        if learner is not None:
+            learner.update = _own_timer("learner_update_call", learner.update)
+            learner.metrics.reduce = _own_timer("learner_reduce", learner.metrics.reduce)
+    iters: dict[str, list[dict[str, float]]] = {a: [] for a in algos}
+    last: dict[str, int] = {}
+    try:
+        for i in range(args.warmup + args.iters):
+            for a, algorithm in algos.items():
+                _OWN.clear()
+                t0 = time.perf_counter()
+                res = algorithm.train()
+                wall = time.perf_counter() - t0
+                steps = int(res[ENV_RUNNER_RESULTS][NUM_ENV_STEPS_SAMPLED_LIFETIME])
+                if i >= args.warmup:
+                    parts = split_parts(res, wall, dict(_OWN))
+                    parts["env_steps"] = steps - last[a]
+                    iters[a].append(parts)
+                last[a] = steps
+    finally:
+        for algorithm in algos.values():
+            algorithm.stop()
+    return {"runners": runners, "iterations": iters}
+
+
+def split_table(split: dict[str, Any]) -> str:
+    """Median ms per iteration of every part, PPO beside PPO+ASOR, and end to end."""
+    iters = split["iterations"]
+    algos = [a for a in ALGOS if a in iters]
+    med = {
+        a: {k: statistics.median(it[k] for it in iters[a]) for k, *_ in SPLIT_ROWS} for a in algos
+    }
+    head = "| part (ms per iteration, median) | " + " | ".join(LABELS[a] for a in algos)
+    both = len(algos) == 2
+    lines = [
+        head + (" | PPO+ASOR − PPO | Δ ÷ PPO's iteration |" if both else " |"),
+        "|---" * (len(algos) + 1 + 2 * both) + "|",
+    ]
+    for key, label, depth in SPLIT_ROWS:
+        name = ("&nbsp;&nbsp;" * max(0, depth - 1)) + (f"**{label}**" if depth <= 1 else label)
+        cells = [f"{1000 * med[a][key]:,.1f}" for a in algos]
+        if both:
+            d = med["asor"][key] - med["ppo"][key]
+            cells += [f"{1000 * d:+,.1f}", f"{100 * d / med['ppo']['wall']:+.1f} %"]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    rates = {
+        a: sum(it["env_steps"] for it in iters[a]) / sum(it["wall"] for it in iters[a])
+        for a in algos
+    }
+    lines.append(
+        "| **end to end, env steps/s** (steps ÷ wall, all timed iterations) | "
+        + " | ".join(f"{rates[a]:,.0f}" for a in algos)
+        + (f" | ratio {rates['asor'] / rates['ppo']:.3f} | |" if both else " |")
+    )
+    if both:
+        pairs = [p["wall"] / q["wall"] for p, q in zip(iters["ppo"], iters["asor"], strict=False)]
+        lines.append(
+            f"| PPO ÷ PPO+ASOR iteration time, per interleaved pair | "
+            f"{', '.join(f'{x:.2f}' for x in pairs)} | | | |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------- weight sync
+def measure_sync(args: argparse.Namespace) -> dict[str, Any]:
+    """PPO's weight sync after an update, alone, for PPO+ASOR with `--sync-runners` idle
+    runners (1 env each): the bytes of the inference-only state per module, and ms until every
+    runner has applied it (the sync as PPO's `training_step` calls it: every module the
+    update reported, ASOR's learner-only ones included; then a no-op call on every runner,
+    which their actors run after `set_state`), against the policy's modules alone."""
+    import pickle
+
+    from ray.rllib.core import COMPONENT_LEARNER, COMPONENT_RL_MODULE, DEFAULT_MODULE_ID
+
+    ns = argparse.Namespace(**{**vars(args), "envs_per_runner": 1})
+    algorithm = race_config("asor", ns, args.sync_runners).build_algo()
+    group, lg = algorithm.env_runner_group, algorithm.learner_group
+    try:
+        module_ids = sorted(lg._learner.module.keys()) if lg._learner is not None else []
+        state = lg.get_state(
+            components=[f"{COMPONENT_LEARNER}/{COMPONENT_RL_MODULE}/{m}" for m in module_ids],
+            inference_only=True,
+        )[COMPONENT_LEARNER][COMPONENT_RL_MODULE]
+        sizes = {m: len(pickle.dumps(state.get(m, {}))) for m in module_ids}
+        # a single-agent runner holds the policy's RLModule itself (no MultiRLModule)
+        on_runners = group.foreach_env_runner(
+            lambda r: sorted(r.module.keys()) if hasattr(r.module, "keys") else [None],
+            local_env_runner=False,
+        )[0]
+        on_runners = [DEFAULT_MODULE_ID if m is None else m for m in on_runners]
+        policies = [m for m in module_ids if m in on_runners]
+        out: dict[str, Any] = {
+            "runners": args.sync_runners,
+            "bytes": sizes,
+            "runner_modules": on_runners,
+        }
+        variants = {"as_ppo_calls_it": module_ids, "policy_only": policies}
+        times: dict[str, list[float]] = {name: [] for name in variants}
+        for i in range(1 + args.sync_reps):  # the variants interleaved; the first round dropped
+            for name, mods in variants.items():
+                t0 = time.perf_counter()
+                group.sync_weights(
+                    from_worker_or_learner_group=lg, policies=set(mods), inference_only=True
+                )
+                group.foreach_env_runner(lambda r: 0, local_env_runner=False)
+                if i:
+                    times[name].append(time.perf_counter() - t0)
+        for name, ts in times.items():
+            out[name + "_ms"] = 1000 * statistics.median(ts)
+        return out
+    finally:
+        algorithm.stop()
+
+
+def sync_table(res: dict[str, Any]) -> str:
+    mb = {m: b / 1e6 for m, b in res["bytes"].items()}
+    return (
+        f"weight sync to {res['runners']} runners (PPO+ASOR; median of the repetitions): as "
+        f"PPO calls it (modules {', '.join(sorted(mb))}) {res['as_ppo_calls_it_ms']:.1f} ms; the "
+        f"runners' modules only ({', '.join(res['runner_modules'])}) "
+        f"{res['policy_only_ms']:.1f} ms; inference-only state per module: "
+        + ", ".join(f"{m} {v:.2f} MB" for m, v in mb.items())
+        + "\n"
+    )
 
 
 # ---------------------------------------------------------------------------- table
@@ -506,7 +784,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                     f"({res['env_steps_per_cpu_s']:.0f} per CPU second) on {res['learner_device']}",
                     flush=True,
                 )
-    ray_parts = [p for p in args.part_list if p in ("sample", "e2e", "tune")]
+    ray_parts = [p for p in args.part_list if p in ("sample", "e2e", "tune", "split", "sync")]
     if ray_parts and not args.trees:
         why = start_ray(args)
         if why is not None:
@@ -519,7 +797,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
 
             register_race_envs()
             for (algo, n), row in rows.items():
-                parts = [p for p in ray_parts if p != "tune"]
+                parts = [p for p in ray_parts if p in ("sample", "e2e")]
                 if parts:
                     row.update(measure_algo(algo, n, args, parts))
                     save()
@@ -527,6 +805,19 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                         f"{LABELS[algo]} r{n}: " + ", ".join(f"{p} {row[p]:.0f}" for p in parts),
                         flush=True,
                     )
+            if "split" in ray_parts:
+                results["split"] = []
+                for n in args.runner_counts:
+                    split = measure_split(n, args)
+                    results["split"].append(split)
+                    save()
+                    print(
+                        f"\nsplit, {n} runner(s) per algorithm:\n" + split_table(split), flush=True
+                    )
+            if "sync" in ray_parts:
+                results["sync"] = measure_sync(args)
+                save()
+                print(sync_table(results["sync"]), flush=True)
             if "tune" in ray_parts:
                 for algo in args.algo_list:
                     try:
@@ -578,6 +869,10 @@ def main(argv: list[str] | None = None) -> int:
             )
     else:
         print(table(results))
+        if "sync" in results:
+            print(sync_table(results["sync"]))
+        for split in results.get("split", []):
+            print(f"split, {split['runners']} runner(s) per algorithm:\n" + split_table(split))
     return 0
 
 

@@ -57,6 +57,18 @@ class _LearnerOnlyModule(TorchRLModule, SelfSupervisedLossAPI):
     def _forward(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
         raise NotImplementedError(f"{type(self).__name__} is learner-only: use forward_train")
 
+    def get_state(self, *args: Any, inference_only: bool = False, **kwargs: Any) -> dict:
+        """The module's state; empty with `inference_only`. RLlib asks for the inference-only
+        state only to send it to env runners (the weight sync after every update, restores),
+        and it asks for every module the update reported, these included, although runners
+        never hold a learner-only module and drop its state: on the race that was the
+        discriminator's archive, about 12 MB copied off the Learner's device, serialised and
+        shipped to every runner each iteration. Checkpoints and Learner-to-Learner state
+        (`inference_only=False`) keep everything."""
+        if inference_only:
+            return {}
+        return super().get_state(*args, inference_only=False, **kwargs)
+
 
 class AsorDiscriminatorModule(_LearnerOnlyModule):
     """ω(s) = σ(f(s)) and the rest of ASOR's state (`rllib_asor.asor.update.AsorState`:

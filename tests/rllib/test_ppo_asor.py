@@ -357,6 +357,30 @@ def test_robust_checkpoint_restores_the_archive_and_normalisers(robust, tmp_path
         restored.stop()
 
 
+def test_learner_only_modules_send_nothing_to_env_runners(robust):
+    """The weight sync asks for every module the update reported, ASOR's included; their
+    inference-only state is empty (runners hold no such module), their full state is not."""
+    from ray.rllib.core import COMPONENT_LEARNER, COMPONENT_RL_MODULE
+
+    robust.train()
+    ids = [DEFAULT_MODULE_ID, DISC, PROXY]
+    comps = [f"{COMPONENT_LEARNER}/{COMPONENT_RL_MODULE}/{m}" for m in ids]
+    lg = robust.learner_group
+    sent = lg.get_state(components=comps, inference_only=True)[COMPONENT_LEARNER]
+    assert sent[COMPONENT_RL_MODULE][DISC] == {} and sent[COMPONENT_RL_MODULE][PROXY] == {}
+    assert sent[COMPONENT_RL_MODULE][DEFAULT_MODULE_ID]  # the policy's weights still go
+    full = lg.get_state(components=comps)[COMPONENT_LEARNER][COMPONENT_RL_MODULE]
+    assert full[DISC]["state.archive.size"].sum() > 0 and full[PROXY]
+    # what PPO's training_step syncs reaches the runner and changes its policy's weights
+    robust.env_runner_group.sync_weights(
+        from_worker_or_learner_group=lg, policies=set(ids), inference_only=True
+    )
+    runner = robust.env_runner.module
+    policy = lg._learner.module[DEFAULT_MODULE_ID]
+    for name, tensor in runner.state_dict().items():
+        assert torch.equal(tensor, policy.state_dict()[name]), name
+
+
 def _cartpole_ppo(reward_scale: float):
     import gymnasium as gym
     from ray.tune.registry import register_env
