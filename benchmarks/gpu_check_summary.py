@@ -3,8 +3,9 @@
     python -m benchmarks.gpu_check_summary benchmarks/out/gpu_check
 
 Reads OUT/gpu_tests.xml (pytest's junit report), OUT/e2e/scaling.json (sampling and end to
-end) and OUT/learner/scaling.json (the Learner alone), both from `benchmarks.scaling` at
-minibatch 2,048; a missing file is a row that says so. The
+end), OUT/learner/scaling.json (the Learner alone) and OUT/split/scaling.json (where an
+iteration's time goes, and the weight sync), all from `benchmarks.scaling` at minibatch
+2,048; a missing file is a row or a line that says so. The
 targets are those for a 16-core node with one GPU: PPO+ASOR end to end at the most runners
 ≥ 8× its 1-runner rate, the GPU Learner alone ≥ 10,000 env steps/s, PPO+ASOR ≥ 0.9× PPO at
 the most runners. On a CPU they are shown, not judged.
@@ -126,6 +127,19 @@ def main(argv: list[str] | None = None) -> int:
             )
     for check, shown, target, verdict in targets(e2e, learner):
         lines.append(f"| {check} | {shown} | {target} | {verdict} |")
+    split = load(out / "split" / "scaling.json")
+    if split is None:
+        lines.append("\nsplit of an iteration: no result (see split.log)")
+    else:
+        from benchmarks.scaling import split_table, sync_table
+
+        for part in split.get("split", []):
+            lines.append(
+                f"\nwhere an iteration's time goes, {part['runners']} runners ({split['machine']}):"
+            )
+            lines.append(split_table(part))
+        if "sync" in split:
+            lines.append(sync_table(split["sync"]))
     print("\n".join(lines))
     return 0
 

@@ -1,18 +1,19 @@
 #!/usr/bin/env bash
 # The GPU check (docs/cluster.md, "Running on GPUs"): on a machine with the project installed
 # (`make install`, or the offline kit: `source .gpu/install.sh`), run the `gpu`-marked tests and
-# the race scaling benchmark, then print one summary table. At most about 9 minutes: every step
+# the race scaling benchmark, then print one summary table. At most about 12 minutes: every step
 # runs under `timeout`. On a machine without CUDA the tests skip and the benchmark runs --quick
 # on the CPU. Steps that cannot run here (no pytest, Ray cannot start) print one line and the
 # rest goes on. Usage:  scripts/gpu_check.sh   or   make gpu-check
 # Knobs: GPU_CHECK_OUT (default benchmarks/out/gpu_check), GPU_CHECK_TEST_S (240),
 # GPU_CHECK_BENCH_S (200; 420 without CUDA), GPU_CHECK_LEARNER_S (90; 120 without CUDA),
+# GPU_CHECK_SPLIT_S (180; 420 without CUDA),
 # GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without).
 set -u
 cd "$(dirname "$0")/.."
 out=${GPU_CHECK_OUT:-benchmarks/out/gpu_check}
 mkdir -p "$out"
-rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/e2e
+rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/e2e "$out"/split
 if [ -x .venv/bin/python ]; then py=${PYTHON:-.venv/bin/python}; else py=${PYTHON:-python3}; fi
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} RAY_memory_monitor_refresh_ms=0 \
   RAY_DISABLE_DOCKER_CPU_WARNING=1 RAY_USAGE_STATS_ENABLED=0 PYTHONUNBUFFERED=1
@@ -26,13 +27,13 @@ if ! "$py" -c "import torch" 2>/dev/null; then
 fi
 cuda=$("$py" -c "import torch; print(int(torch.cuda.is_available()))")
 if [ "$cuda" = 1 ]; then
-  device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=200; learner_s=90
+  device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=200; learner_s=90; split_s=180
 else  # a CPU machine checks the script itself: slower, so longer limits
-  device=cpu; runners=${GPU_CHECK_RUNNERS:-1,2}; bench_s=420; learner_s=120
+  device=cpu; runners=${GPU_CHECK_RUNNERS:-1,2}; bench_s=420; learner_s=120; split_s=420
   echo "gpu-check: torch sees no CUDA device: the gpu tests skip, the benchmark runs on the CPU"
 fi
 test_s=${GPU_CHECK_TEST_S:-240}; bench_s=${GPU_CHECK_BENCH_S:-$bench_s}
-learner_s=${GPU_CHECK_LEARNER_S:-$learner_s}
+learner_s=${GPU_CHECK_LEARNER_S:-$learner_s}; split_s=${GPU_CHECK_SPLIT_S:-$split_s}
 
 # 1. The gpu-marked tests: only the files that hold them (collecting the whole suite would
 #    import modules whose extras, e.g. highway-env, an offline kit does not carry).
@@ -62,5 +63,13 @@ timeout -k 10 "$bench_s" "$py" -m benchmarks.scaling --quick --device "$device" 
   --runners "$runners" --parts sample,e2e --minibatch 2048 --out "$out/e2e" > "$out/e2e.log" 2>&1
 echo "gpu-check: benchmark exit $? (log: $out/e2e.log)"
 
-# 4. One table.
+# 4. Where an iteration's time goes, PPO beside PPO+ASOR (built side by side, iterations
+#    interleaved) at the most runners, and the weight sync to that many runners alone.
+echo "gpu-check: benchmarks.scaling --parts split,sync --runners $last (at most $split_s s)"
+timeout -k 10 "$split_s" "$py" -m benchmarks.scaling --quick --device "$device" \
+  --runners "$last" --sync-runners "$last" --parts split,sync --minibatch 2048 \
+  --out "$out/split" > "$out/split.log" 2>&1
+echo "gpu-check: benchmark exit $? (log: $out/split.log)"
+
+# 5. One table.
 "$py" -m benchmarks.gpu_check_summary "$out"
