@@ -455,7 +455,7 @@ SPLIT_ROWS = (
     ("env_sync", "env-runner connector states (`timers/synch_env_connectors`)", 1),
     ("results", "results, callbacks (`train()` − `training_iteration`)", 1),
     ("wall", "iteration, wall clock (`algo.train()`)", 0),
-    ("learner_cpu", "the Learner's `update()` in CPU seconds of the driver (our timer)", 0),
+    ("learner_cpu", "the Learner's `update()`, CPU time of the driver (our timer)", 0),
 )
 
 _OWN: dict[str, float] = {}
