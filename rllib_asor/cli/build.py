@@ -7,7 +7,7 @@ from typing import Any
 
 from rllib_asor import ray_compat as compat
 from rllib_asor.cli import grid, multi_agent
-from rllib_asor.cli.errors import UsageError, one_line, quiet
+from rllib_asor.cli.errors import Problems, UsageError, one_line, quiet
 from rllib_asor.cli.spec import Experiment
 from rllib_asor.cli.value_types import check_config_values
 from rllib_asor.registry.families import families_with_curriculum, family_of
@@ -41,8 +41,9 @@ PPO_ONLY_LEARNER_KEYS = ("overlap_sampling", "drop_bootstrap_rows")
 
 def algorithm_class(exp: Experiment) -> type:
     """The RLlib Algorithm class for `exp.run` (UsageError if unknown)."""
-    from ray.rllib.algorithms.registry import ALGORITHMS
     from ray.tune.registry import get_trainable_cls
+
+    from rllib_asor.registry.algorithms import register_algorithms, run_names
 
     learner_dict = exp.config.get("learner_config_dict")
     learner_dict = learner_dict if isinstance(learner_dict, dict) else {}
@@ -59,14 +60,11 @@ def algorithm_class(exp: Experiment) -> type:
         return OverlappedPPO  # PPO whose env runners sample during the update
     try:
         with quiet():
-            from rllib_asor.registry.algorithms import register_algorithms
-
-            register_algorithms()  # MAPLE, MOPO
+            register_algorithms()  # ours: MAPLE, MOPO, ESCP, FastSAC, ...
             return get_trainable_cls(exp.run)
     except Exception:
-        allowed = ", ".join(sorted(ALGORITHMS))
         raise UsageError(
-            f"unknown algorithm {exp.run!r}; allowed: {allowed}",
+            f"unknown algorithm {exp.run!r}; allowed: {', '.join(run_names())}",
             source=exp.source,
             key=f"{exp.name}.run",
         ) from None
@@ -108,7 +106,8 @@ def check_key(default_cfg: Any, key: str, exp: Experiment) -> None:
 
 def check_n_step(exp: Experiment, default_cfg: Any) -> None:
     """`n_step` (DQN, SAC and their kin) needs fragments at least that long: RLlib's own check
-    fails with "'int' object is not subscriptable" (its message indexes an int `n_step`)."""
+    fails with "'int' object is not subscriptable" (its message indexes an int `n_step`). Fixed
+    values were raised as old RLlib did (`legacy.translate_config`); a grid is refused here."""
     if not hasattr(default_cfg, "n_step") or "n_step" not in exp.config:
         return
     for n_step in _candidates(exp.config["n_step"]):
@@ -139,10 +138,15 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
     cls = algorithm_class(exp)
     with quiet():
         cfg = cls.get_default_config()
+        problems = Problems()  # every key's problem at once
         for key in exp.config:
-            check_key(cfg, key, exp)
-        check_config_values(exp, cfg, attr_name)
-        check_n_step(exp, cfg)
+            with problems.check():
+                check_key(cfg, key, exp)
+        with problems.check():
+            check_config_values(exp, cfg, attr_name)
+        with problems.check():
+            check_n_step(exp, cfg)
+        problems.raise_any()
         values = grid.with_candidates(exp.config, choice)
         family = family_of(exp.env)
         if family is not None:

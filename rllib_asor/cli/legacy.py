@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from rllib_asor.cli import retired
-from rllib_asor.cli.errors import UsageError
+from rllib_asor.cli.errors import Problems, UsageError
 
 # Old config key -> new config key (same value).
 RENAMED_CONFIG_KEYS: dict[str, str] = {
@@ -103,95 +103,131 @@ def flatten_observations_connector(env: Any = None, spaces: Any = None, device: 
 def translate_config(
     config: dict[str, Any], source: str, prefix: str = "", run: str | None = None
 ) -> tuple[dict[str, Any], list[str]]:
-    """Return (new-stack config dict, warnings); raise UsageError for unsupported legacy values.
+    """Return (new-stack config dict, warnings); raise UsageError for unsupported legacy values
+    (every such key, one line each).
 
     `model: {...}` becomes `model_config: {...}`, `observation_filter: MeanStdFilter` becomes a
-    MeanStdFilter env-to-module connector, and the keys the new stack retired go where
-    `retired.py` says (`framework: tf` runs as torch, `horizon` is the env's episode limit, ...).
+    MeanStdFilter env-to-module connector, the keys the new stack retired go where `retired.py`
+    says (`framework: tf` runs as torch, `horizon` is the env's episode limit, ...), and a
+    `rollout_fragment_length` shorter than `n_step` is raised to it, as old RLlib did.
     """
     out: dict[str, Any] = {}
     warnings: list[str] = []
+    problems = Problems()
     given = config.get("model_config") or {}
     if not isinstance(given, dict):
-        raise UsageError(
-            f"{given!r} is invalid: allowed a mapping of model settings",
-            source=source,
-            key=f"{prefix}model_config",
+        problems.add(
+            UsageError(
+                f"{given!r} is invalid: allowed a mapping of model settings",
+                source=source,
+                key=f"{prefix}model_config",
+            )
         )
+        given = {}
     model_config: dict[str, Any] = dict(given)
     into = retired.Into(out, model_config, source, prefix, warnings)
     for key, value in config.items():
-        if key == "model_config" or retired.translate(key, value, into):
-            continue
-        renamed = {**RENAMED_CONFIG_KEYS, **RENAMED_CONFIG_KEYS_BY_RUN.get(str(run), {})}
-        if key in renamed:
-            new = renamed[key]
-            warnings.append(f"{source}: legacy key '{key}' translated to '{new}'")
-            out[new] = value
-        elif key == "model":
-            if not isinstance(value, dict):
-                raise UsageError(
-                    f"must be a mapping of model settings, got {value!r}",
-                    source=source,
-                    key="model",
-                )
-            value = dict(value)
-            custom = value.pop("custom_model", None)
-            custom_config = value.pop("custom_model_config", None) or {}
-            if custom:
-                out["rl_module"] = {"module_class": custom}
-                for sub, sub_value in dict(custom_config).items():
-                    model_config.setdefault(sub, sub_value)
-                warnings.append(
-                    f"{source}: legacy key 'model.custom_model: {custom}' translated to "
-                    "'rl_module: {module_class: ...}' (custom_model_config -> model_config)"
-                )
-            if value:
-                for sub, sub_value in value.items():
-                    _check_model_key(sub, source, f"{prefix}model.{sub}")
-                    model_config.setdefault(sub, sub_value)
-                warnings.append(
-                    f"{source}: legacy key 'model' ({', '.join(sorted(value))}) translated to "
-                    "'model_config' (config.rl_module(model_config=...))"
-                )
-        elif key == "rl_module":
-            block = dict(value) if isinstance(value, dict) else None
-            if block is None or "module_class" not in block or set(block) - set(RL_MODULE_KEYS):
-                raise UsageError(
-                    f"{value!r} is invalid: allowed a mapping with 'module_class' (a name such "
-                    "as race_net or 'package.module:Class') and optional 'model_config'",
-                    source=source,
-                    key=f"{prefix}rl_module",
-                )
-            for sub, sub_value in dict(block.pop("model_config", None) or {}).items():
-                model_config.setdefault(sub, sub_value)
-            out["rl_module"] = block
-        elif key in MODEL_CONFIG_TOPLEVEL_KEYS:
-            model_config.setdefault(key, value)
-            warnings.append(f"{source}: legacy key '{key}' translated to 'model_config.{key}'")
-        elif key == "observation_filter":
-            if value not in OBSERVATION_FILTERS:
-                raise UsageError(
-                    f"{value!r} is invalid: allowed {' | '.join(OBSERVATION_FILTERS)}",
-                    source=source,
-                    key=f"{prefix}observation_filter",
-                )
-            if value == "MeanStdFilter":
-                out["env_to_module_connector"] = mean_std_filter_connector
-                warnings.append(
-                    f"{source}: legacy key 'observation_filter: MeanStdFilter' translated to a "
-                    "MeanStdFilter env-to-module connector"
-                )
-            else:
-                warnings.append(f"{source}: legacy key 'observation_filter: NoFilter' ignored")
-        else:
-            out[key] = value
+        with problems.check():
+            _translate_key(key, value, into, run, problems)
+    problems.raise_any()
+    _fragment_for_n_step(out, source, warnings)
     if model_config:
         out["model_config"] = model_config
     if into.env_config:  # e.g. `horizon`; the file's own env_config wins
         env_config = out.get("env_config")
         out["env_config"] = {**into.env_config, **(env_config if isinstance(env_config, dict) else {})}
     return _moved_paths(out, source, warnings), warnings
+
+
+def _translate_key(
+    key: str, value: Any, into: retired.Into, run: str | None, problems: Problems
+) -> None:
+    """One config key into `into.out` / `into.model_config`, with its warning; UsageError for
+    an unsupported legacy value (each bad `model:` setting kept in `problems`)."""
+    out, model_config, source, prefix = into.out, into.model_config, into.source, into.prefix
+    if key == "model_config" or retired.translate(key, value, into):
+        return
+    renamed = {**RENAMED_CONFIG_KEYS, **RENAMED_CONFIG_KEYS_BY_RUN.get(str(run), {})}
+    if key in renamed:
+        new = renamed[key]
+        into.warn(f"legacy key '{key}' translated to '{new}'")
+        out[new] = value
+    elif key == "model":
+        if not isinstance(value, dict):
+            raise UsageError(
+                f"must be a mapping of model settings, got {value!r}",
+                source=source,
+                key=f"{prefix}model",
+            )
+        value = dict(value)
+        custom = value.pop("custom_model", None)
+        custom_config = value.pop("custom_model_config", None) or {}
+        if custom:
+            out["rl_module"] = {"module_class": custom}
+            for sub, sub_value in dict(custom_config).items():
+                model_config.setdefault(sub, sub_value)
+            into.warn(
+                f"legacy key 'model.custom_model: {custom}' translated to "
+                "'rl_module: {module_class: ...}' (custom_model_config -> model_config)"
+            )
+        if value:
+            for sub, sub_value in value.items():
+                with problems.check():
+                    _check_model_key(sub, source, f"{prefix}model.{sub}")
+                    model_config.setdefault(sub, sub_value)
+            into.warn(
+                f"legacy key 'model' ({', '.join(sorted(value))}) translated to "
+                "'model_config' (config.rl_module(model_config=...))"
+            )
+    elif key == "rl_module":
+        block = dict(value) if isinstance(value, dict) else None
+        if block is None or "module_class" not in block or set(block) - set(RL_MODULE_KEYS):
+            raise UsageError(
+                f"{value!r} is invalid: allowed a mapping with 'module_class' (a name such "
+                "as race_net or 'package.module:Class') and optional 'model_config'",
+                source=source,
+                key=f"{prefix}rl_module",
+            )
+        for sub, sub_value in dict(block.pop("model_config", None) or {}).items():
+            model_config.setdefault(sub, sub_value)
+        out["rl_module"] = block
+    elif key in MODEL_CONFIG_TOPLEVEL_KEYS:
+        model_config.setdefault(key, value)
+        into.warn(f"legacy key '{key}' translated to 'model_config.{key}'")
+    elif key == "observation_filter":
+        if value not in OBSERVATION_FILTERS:
+            raise UsageError(
+                f"{value!r} is invalid: allowed {' | '.join(OBSERVATION_FILTERS)}",
+                source=source,
+                key=f"{prefix}observation_filter",
+            )
+        if value == "MeanStdFilter":
+            out["env_to_module_connector"] = mean_std_filter_connector
+            into.warn(
+                "legacy key 'observation_filter: MeanStdFilter' translated to a "
+                "MeanStdFilter env-to-module connector"
+            )
+        else:
+            into.warn("legacy key 'observation_filter: NoFilter' ignored")
+    else:
+        out[key] = value
+
+
+def _fragment_for_n_step(out: dict[str, Any], source: str, warnings: list[str]) -> None:
+    """A fixed `rollout_fragment_length` shorter than a fixed `n_step` raised to it: old RLlib
+    did so itself (`max(rollout_fragment_length, n_step)` in DQN's validate_config, SAC's from
+    Ray 1.10), RLlib 2.60 refuses the shorter fragment. Grids are left to `build.check_n_step`."""
+    n_step, fragment = out.get("n_step"), out.get("rollout_fragment_length")
+    longest = n_step[-1] if isinstance(n_step, list | tuple) and n_step else n_step
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in (longest, fragment)):
+        return
+    if fragment < longest:
+        out["rollout_fragment_length"] = longest
+        warnings.append(
+            f"{source}: 'rollout_fragment_length: {fragment}' translated to "
+            f"'rollout_fragment_length: {longest}' (n_step: {n_step}): old RLlib raised the "
+            "fragment to n_step itself, RLlib 2.60 refuses a shorter one"
+        )
 
 
 def _moved_paths(value: Any, source: str, warnings: list[str]) -> Any:
@@ -224,19 +260,25 @@ def _check_model_key(key: str, source: str, shown: str) -> None:
 def translate_stop(
     stop: dict[str, Any], source: str, prefix: str = "stop."
 ) -> tuple[dict[str, Any], list[str]]:
-    """Rename old result names in a stop dict; values must be numbers."""
+    """Rename old result names in a stop dict; values must be numbers (UsageError naming every
+    key that is not)."""
     out: dict[str, Any] = {}
     warnings: list[str] = []
+    problems = Problems()
     for key, value in stop.items():
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise UsageError(
-                f"stop value {value!r} is invalid: allowed a number",
-                source=source,
-                key=f"{prefix}{key}",
+            problems.add(
+                UsageError(
+                    f"stop value {value!r} is invalid: allowed a number",
+                    source=source,
+                    key=f"{prefix}{key}",
+                )
             )
+            continue
         if key in RENAMED_STOP_KEYS:
             new = RENAMED_STOP_KEYS[key]
             warnings.append(f"{source}: legacy stop key '{key}' translated to '{new}'")
             key = new
         out[key] = value
+    problems.raise_any()
     return out, warnings

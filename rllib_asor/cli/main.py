@@ -99,7 +99,8 @@ def _version() -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `rllib` console script; returns the exit status.
 
-    0 success, 1 training failed (a trial errored), 2 bad input (one line on stderr).
+    0 success, 1 training failed (a trial errored), 2 bad input (one line per problem on
+    stderr).
     """
     parser = build_parser()
     try:
@@ -113,7 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except UsageError as e:
-        print(f"rllib {args.command}: error: {e}", file=sys.stderr)
+        for line in str(e).splitlines():  # one line per problem
+            print(f"rllib {args.command}: error: {line}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"rllib {args.command}: interrupted", file=sys.stderr)

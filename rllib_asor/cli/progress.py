@@ -37,6 +37,15 @@ OPTIONAL = (
 )
 
 
+NO_RETURN = "n/a (no episode finished)"
+"""What a summary says for `episode_return_mean` before any episode ended (RLlib reports nan)."""
+
+
+def finite(value: Any) -> bool:
+    """Whether `value` is a number worth showing (not None, nan or inf)."""
+    return isinstance(value, int | float) and math.isfinite(value)
+
+
 class LineReporter(ProgressReporter):
     """Tune progress reporter printing one compact line per trial (see the module docstring)."""
 
@@ -105,8 +114,7 @@ class LineReporter(ProgressReporter):
             tail.insert(0, inert.short)
         for label, path, fmt in OPTIONAL:  # in order, as many as fit
             value = _get(result, path)
-            shown = isinstance(value, int | float) and math.isfinite(value)
-            part = f"{label} {fmt.format(value)}" if shown else None
+            part = f"{label} {fmt.format(value)}" if finite(value) else None
             if part and len("  ".join([*parts, part, *tail])) <= WIDTH:
                 parts.append(part)
         return "  ".join([*parts, *tail])[:WIDTH]

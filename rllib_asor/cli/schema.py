@@ -24,18 +24,10 @@ from pydantic import TypeAdapter
 
 from rllib_asor.cli import legacy
 from rllib_asor.cli.spec import SETTINGS_BLOCKS, ExperimentSpec
+from rllib_asor.registry.algorithms import run_names
 
 SCHEMA_FILE = Path(__file__).with_name("experiment.schema.json")
 DIALECT = "https://json-schema.org/draft/2020-12/schema"
-
-
-def run_names() -> list[str]:
-    """Every `run:` name: RLlib's registered algorithms and ours."""
-    from ray.rllib.algorithms.registry import ALGORITHMS as RLLIB
-
-    from rllib_asor.registry.algorithms import ALGORITHMS as OURS
-
-    return sorted(set(RLLIB) | set(OURS))
 
 
 def grid_or_value(schema: dict[str, Any]) -> dict[str, Any]:

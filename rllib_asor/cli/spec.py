@@ -17,7 +17,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from rllib_asor.cli import grid, legacy
-from rllib_asor.cli.errors import UsageError
+from rllib_asor.cli.errors import Problems, UsageError
 from rllib_asor.settings_model import Allowed, allowed_text, one_of
 
 DEFAULT_NUM_TO_KEEP = 3
@@ -134,8 +134,10 @@ class Experiment:
         return grid.count_trials(self.config, self.asor) * self.num_samples
 
 
-def load_file(path: str) -> list[Experiment]:
-    """Parse a YAML experiment file into experiments (not yet validated against RLlib)."""
+def load_file(path: str, problems: Problems | None = None) -> list[Experiment]:
+    """Parse a YAML experiment file into experiments (not yet validated against RLlib); a
+    UsageError names every experiment's problems, or with `problems` they are kept there and
+    the other experiments returned (so that their later checks report theirs too)."""
     if not os.path.isfile(path):
         raise UsageError("file not found (expected a YAML experiment file)", source=path)
     try:
@@ -154,7 +156,14 @@ def load_file(path: str) -> list[Experiment]:
         raise UsageError(
             "expected a mapping 'experiment-name: {env, run, stop, config}'", source=path
         )
-    return [parse_experiment(str(name), spec, path) for name, spec in data.items()]
+    found = Problems() if problems is None else problems  # every experiment's at once
+    exps = []
+    for name, spec in data.items():
+        with found.check():
+            exps.append(parse_experiment(str(name), spec, path))
+    if problems is None:
+        found.raise_any()
+    return exps
 
 
 def _score_attribute(value: Any, ckpt: dict[str, Any], source: str, warns: list[str]) -> Any:
@@ -184,14 +193,18 @@ def absolute_input(value: Any) -> Any:
 
 
 def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
-    """Translate one `name: {...}` entry (legacy keys renamed with a warning)."""
+    """Translate one `name: {...}` entry (legacy keys renamed with a warning); a UsageError
+    names every problem of the entry (one line each)."""
     if not isinstance(spec, dict):
         raise UsageError(
             f"must be a mapping with keys {', '.join(SPEC_KEYS)}", source=source, key=name
         )
     spec = copy.deepcopy(spec)
     warns: list[str] = []
-    ckpt = _mapping(spec.pop("checkpoint_config", None) or {}, source, f"{name}.checkpoint_config")
+    problems = Problems()
+    ckpt = _mapping_or_none(
+        spec.pop("checkpoint_config", None), problems, source, f"{name}.checkpoint_config"
+    )
     for old, (section, new) in legacy.RENAMED_SPEC_KEYS.items():
         if old in spec:
             value = spec.pop(old)
@@ -205,30 +218,34 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
             else:
                 spec.setdefault(new, value)
                 warns.append(f"{source}: legacy key '{old}' translated to '{new}'")
-    config = _mapping(spec.get("config") or {}, source, f"{name}.config")
+    config = _mapping_or_none(spec.get("config"), problems, source, f"{name}.config")
     given = {block: config.pop(block) for block in SETTINGS_BLOCKS if block in config}
     blocks = {
-        block: _mapping(value, source, f"{name}.config.{block}")
+        block: _mapping_or_none(value, problems, source, f"{name}.config.{block}")
         for block, value in given.items()
         if value is not None  # `asor: null`: no block
     }
-    config, more = legacy.translate_config(config, source, f"{name}.config.", spec.get("run"))
-    warns += more
+    with problems.check():
+        config, more = legacy.translate_config(config, source, f"{name}.config.", spec.get("run"))
+        warns += more
     asor = blocks.pop("asor", None)
     for block, settings in blocks.items():  # e.g. `maple:` -> MapleConfig.maple_settings
         config[SETTINGS_BLOCKS[block].key or block] = settings
     if "input" in config:
         config["input"] = absolute_input(config["input"])
-    stop, more = legacy.translate_stop(
-        _mapping(spec.get("stop") or {}, source, f"{name}.stop"), source, f"{name}.stop."
-    )
-    warns += more
+    stop: dict[str, Any] = {}
+    with problems.check():
+        given_stop = _mapping_or_none(spec.get("stop"), problems, source, f"{name}.stop")
+        stop, more = legacy.translate_stop(given_stop, source, f"{name}.stop.")
+        warns += more
     env = spec.get("env", config.pop("env", None))
     checked = {**spec, "env": env, "stop": stop, "config": {}, "checkpoint_config": ckpt}
     try:
         ExperimentSpec.model_validate({k: v for k, v in checked.items() if v is not None})
     except ValidationError as e:
-        raise _spec_error(e, name, source, checked) from None
+        for problem in _spec_problems(e, name, source, checked):
+            problems.add(problem)
+    problems.raise_any()
     return Experiment(
         name=name,
         run=spec["run"],
@@ -244,25 +261,28 @@ def parse_experiment(name: str, spec: Any, source: str) -> Experiment:
     )
 
 
-def _spec_error(
+def _spec_problems(
     error: ValidationError, name: str, source: str, given: dict[str, Any]
-) -> UsageError:
-    """The first problem `ExperimentSpec` found, in one line naming the key."""
-    problem = error.errors()[0]
-    path = [str(part) for part in problem["loc"]]
-    model: type[BaseModel] = ExperimentSpec
-    if path[0] == "checkpoint_config" and len(path) > 1:
-        model, path, given = CheckpointSettings, path[:2], given["checkpoint_config"]
-    else:
-        path = path[:1]
-    key = f"{name}.{'.'.join(path)}"
-    if problem["type"] == "extra_forbidden":
-        message = f"unknown key; allowed: {', '.join(model.model_fields)}"
-    elif given.get(path[-1]) is None:
-        message = f"missing; allowed: {allowed_text(model, path[-1])}"
-    else:
-        message = f"{given[path[-1]]!r} is invalid: allowed {allowed_text(model, path[-1])}"
-    return UsageError(message, source=source, key=key)
+) -> list[UsageError]:
+    """Every problem `ExperimentSpec` found, one line each naming its key."""
+    out = []
+    for problem in error.errors():
+        path = [str(part) for part in problem["loc"]]
+        model: type[BaseModel] = ExperimentSpec
+        values = given
+        if path[0] == "checkpoint_config" and len(path) > 1:
+            model, path, values = CheckpointSettings, path[:2], given["checkpoint_config"]
+        else:
+            path = path[:1]
+        key = f"{name}.{'.'.join(path)}"
+        if problem["type"] == "extra_forbidden":
+            message = f"unknown key; allowed: {', '.join(model.model_fields)}"
+        elif values.get(path[-1]) is None:
+            message = f"missing; allowed: {allowed_text(model, path[-1])}"
+        else:
+            message = f"{values[path[-1]]!r} is invalid: allowed {allowed_text(model, path[-1])}"
+        out.append(UsageError(message, source=source, key=key))
+    return out
 
 
 def from_flags(run: str, env: str, config_json: str | None, name: str | None = None) -> Experiment:
@@ -279,7 +299,9 @@ def from_flags(run: str, env: str, config_json: str | None, name: str | None = N
     return parse_experiment(name, {"run": run, "env": env, "config": config}, "--config")
 
 
-def _mapping(value: Any, source: str, key: str) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        raise UsageError(f"{value!r} is invalid: allowed a mapping", source=source, key=key)
-    return dict(value)
+def _mapping_or_none(value: Any, problems: Problems, source: str, key: str) -> dict[str, Any]:
+    """`value` (None: empty) as a dict; anything else is a problem (and an empty dict)."""
+    if value is None or isinstance(value, dict):
+        return dict(value or {})
+    problems.add(UsageError(f"{value!r} is invalid: allowed a mapping", source=source, key=key))
+    return {}

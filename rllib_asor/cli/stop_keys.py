@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from rllib_asor.cli.errors import UsageError
+from rllib_asor.cli.errors import Problems, UsageError
 
 TUNE_KEYS = (
     "training_iteration",
@@ -343,8 +343,22 @@ def did_you_mean(key: str, candidates: list[str]) -> str:
     )
 
 
+def require_stop(exp: Any) -> None:
+    """A run needs a stop: without one Tune trains until interrupted. UsageError naming what
+    is allowed when neither the file nor `--test`/`--stop` gave one."""
+    if not exp.stop:
+        raise UsageError(
+            "missing: without one the run would train forever; allowed: a result name and the "
+            "value that ends the run, e.g. stop: {num_env_steps_sampled_lifetime: 100000} "
+            "(or training_iteration, time_total_s, env_runners/episode_return_mean), or "
+            "--stop KEY=VALUE",
+            source=exp.source,
+            key=f"{exp.name}.stop",
+        )
+
+
 def check_stop(exp: Any, cfg: Any, evaluation: bool = False) -> None:
-    """UsageError (one line, did-you-mean) for the first stop key `cfg`'s algorithm does not
+    """UsageError (one line each, did-you-mean) for every stop key `cfg`'s algorithm does not
     report; a file with callbacks of its own may name the metrics they log (a warning unless
     the key is a near miss of a known one). `evaluation`: evaluation runs whatever the config
     says (`rllib ab` turns it on)."""
@@ -352,6 +366,7 @@ def check_stop(exp: Any, cfg: Any, evaluation: bool = False) -> None:
         return
     catalogue = Catalogue(exp, cfg)
     catalogue.evaluation = catalogue.evaluation or evaluation
+    problems = Problems()
     for key in exp.stop:
         if not isinstance(key, str) or catalogue.knows(key):
             continue
@@ -362,4 +377,7 @@ def check_stop(exp: Any, cfg: Any, evaluation: bool = False) -> None:
                 "the run only if your callbacks log it"
             )
             continue
-        raise UsageError(catalogue.why_not(key), source=exp.source, key=f"{exp.name}.stop.{key}")
+        problems.add(
+            UsageError(catalogue.why_not(key), source=exp.source, key=f"{exp.name}.stop.{key}")
+        )
+    problems.raise_any()

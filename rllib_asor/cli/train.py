@@ -8,7 +8,7 @@ import sys
 from typing import Any
 
 from rllib_asor.cli import experiment, manifest
-from rllib_asor.cli.errors import UsageError
+from rllib_asor.cli.errors import Problems, UsageError
 from rllib_asor.report.results import RUN_KEY, SMOKE_KEY
 
 DEFAULT_STORAGE = "~/ray_results"
@@ -67,8 +67,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def load_experiments(args: argparse.Namespace) -> list[experiment.Experiment]:
-    """Experiments from `file PATH` / `-f PATH` or from `--run/--env/--config`."""
+def load_experiments(
+    args: argparse.Namespace, problems: Problems | None = None
+) -> list[experiment.Experiment]:
+    """Experiments from `file PATH` / `-f PATH` or from `--run/--env/--config` (with
+    `problems`: a file's experiments that do not parse are kept there, the others returned)."""
     path = args.config_file
     if args.source:
         if len(args.source) == 1 and args.source[0].endswith((".yaml", ".yml")):
@@ -84,7 +87,7 @@ def load_experiments(args: argparse.Namespace) -> list[experiment.Experiment]:
     if path:
         if args.run or args.env or args.config:
             raise UsageError("give either 'file PATH' or --run/--env/--config, not both")
-        exps = experiment.load_file(path)
+        exps = experiment.load_file(path, problems)
         if args.name and len(exps) == 1:
             exps[0].name = args.name
         return exps
@@ -125,21 +128,25 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
             "--resume continues a real run; allowed without --fresh and --test (smoke runs "
             "start over)"
         )
-    exps = load_experiments(args)
+    problems = Problems()
+    exps = load_experiments(args, problems)
     configs = []
     for exp in exps:
         if args.test and not args.name:
             exp.name += manifest.SMOKE_SUFFIX  # smoke runs never share a folder with real runs
-        experiment.check_file(exp)  # as written, before --test/--stop replace anything
-        experiment.apply_overrides(
-            exp,
-            test=args.test,
-            num_env_runners=args.num_env_runners,
-            stop=stop,
-            checkpoint_freq=args.checkpoint_freq,
-            keep_checkpoints=args.keep_checkpoints,
-        )
-        configs.append(experiment.validate(exp))
+        with problems.check():  # every problem of every experiment at once
+            experiment.check_file(exp)  # as written, before --test/--stop replace anything
+        with problems.check():  # what the run adds (a missing stop, the env), once each
+            experiment.apply_overrides(
+                exp,
+                test=args.test,
+                num_env_runners=args.num_env_runners,
+                stop=stop,
+                checkpoint_freq=args.checkpoint_freq,
+                keep_checkpoints=args.keep_checkpoints,
+            )
+            configs.append(experiment.validate(exp))
+    problems.raise_any()
     if getattr(args, "dry_run", False):
         from rllib_asor.cli.dry_run import print_experiments
 
@@ -261,6 +268,8 @@ def _fit(
 
 def print_summary(exp: experiment.Experiment, results: Any) -> int:
     """One line per trial; the number of errored or unfinished trials."""
+    from rllib_asor.cli.progress import NO_RETURN, finite
+
     print(f"rllib: {exp.name}: {len(results)} trial(s), {len(results.errors)} errored")
     for result in results:
         m = result.metrics or {}
@@ -268,7 +277,7 @@ def print_summary(exp: experiment.Experiment, results: Any) -> int:
         steps = m.get("num_env_steps_sampled_lifetime")
         ckpt = result.checkpoint.path if result.checkpoint else None
         status = "ERROR" if result.error else "OK" if m.get("done") else "STOPPED"
-        ret_s = f"{ret:.2f}" if isinstance(ret, int | float) else "n/a"
+        ret_s = f"{ret:.2f}" if finite(ret) else NO_RETURN  # never nan
         print(
             f"  {status} iter={m.get('training_iteration')} env_steps={steps} "
             f"return_mean={ret_s} checkpoint={ckpt}"

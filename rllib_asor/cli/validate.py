@@ -6,11 +6,11 @@ from typing import Any
 
 from rllib_asor.cli import grid
 from rllib_asor.cli.build import algorithm_class, build_algo_config
-from rllib_asor.cli.errors import UsageError, one_line, quiet
+from rllib_asor.cli.errors import Problems, UsageError, one_line, quiet
 from rllib_asor.cli.offline_inputs import check_offline_input
 from rllib_asor.cli.overrides import checkpoint_kwargs
 from rllib_asor.cli.spec import SETTINGS_BLOCKS, Experiment
-from rllib_asor.cli.stop_keys import check_stop
+from rllib_asor.cli.stop_keys import check_stop, require_stop
 
 
 def _check_grids(exp: Experiment) -> None:
@@ -20,14 +20,18 @@ def _check_grids(exp: Experiment) -> None:
             source=exp.source,
             key=f"{exp.name}.config.multi_agent",
         )
+    problems = Problems()
     for tree, prefix in ((exp.config, "config"), (exp.asor or {}, "config.asor")):
         for path, candidates in grid.find_grids(tree):
             if not isinstance(candidates, list) or not candidates:
-                raise UsageError(
-                    f"{candidates!r} is invalid: allowed a non-empty list of values",
-                    source=exp.source,
-                    key=f"{exp.name}.{prefix}.{'.'.join(path)}.grid_search",
+                problems.add(
+                    UsageError(
+                        f"{candidates!r} is invalid: allowed a non-empty list of values",
+                        source=exp.source,
+                        key=f"{exp.name}.{prefix}.{'.'.join(path)}.grid_search",
+                    )
                 )
+    problems.raise_any()
 
 
 def _check_checkpoint_config(exp: Experiment) -> None:
@@ -76,21 +80,25 @@ def _each_candidate(block: dict[str, Any], check: Any, exp: Experiment, key: str
 
 def validate_blocks(exp: Experiment) -> None:
     """Each block of `SETTINGS_BLOCKS` that names its runs (`escp:`, `maple:`) only with one of
-    them, validated by its settings class for every grid candidate (one line naming the key,
-    the value and what is allowed)."""
+    them, validated by its settings class for every grid candidate (one line per block naming
+    the key, the value and what is allowed)."""
+    problems = Problems()
     for name, block in SETTINGS_BLOCKS.items():
         settings = exp.config.get(block.key) if block.runs and block.key else None
         if settings is None:
             continue
         key = f"{exp.name}.config.{name}"
-        if exp.run not in block.runs:
-            article = "an" if name[0] in "aeiou" else "a"
-            raise UsageError(
-                f"{article} {name}: block needs run: {' or '.join(block.runs)}, not {exp.run!r}",
-                source=exp.source,
-                key=key,
-            )
-        _each_candidate(settings, block.settings_class().from_dict, exp, key)
+        with problems.check():
+            if exp.run not in block.runs:
+                article = "an" if name[0] in "aeiou" else "a"
+                raise UsageError(
+                    f"{article} {name}: block needs run: {' or '.join(block.runs)}, "
+                    f"not {exp.run!r}",
+                    source=exp.source,
+                    key=key,
+                )
+            _each_candidate(settings, block.settings_class().from_dict, exp, key)
+    problems.raise_any()
 
 
 def validate_env(exp: Experiment) -> None:
@@ -155,45 +163,82 @@ def check_file(exp: Experiment, evaluation: bool = False) -> None:
     """The file's own `config:` and `stop:` as written, before `--test`, `--stop` or
     `--num-env-runners` replace any of them: what the real run would refuse is refused here
     too. Leaves `exp` as it was, but for numbers written as text (read as numbers).
-    `evaluation`: the caller turns evaluation on (`evaluation/...` stop keys are reported)."""
-    _check_blocks(exp)
-    _check_config_points(exp, evaluation)
+    `evaluation`: the caller turns evaluation on (`evaluation/...` stop keys are reported).
+    A UsageError names every problem found (one line each)."""
+    problems = Problems()
+    _check_configs(exp, problems, _check_blocks(exp, problems), evaluation)
+    problems.raise_any()
 
 
-def _check_blocks(exp: Experiment) -> None:
-    """The grids, checkpoint settings, algorithm and our blocks (`asor:`, `escp:`, ...)."""
-    _check_grids(exp)
-    _check_checkpoint_config(exp)
-    algorithm_class(exp)
-    validate_asor(exp)
-    validate_blocks(exp)
+def _check_blocks(exp: Experiment, problems: Problems) -> bool:
+    """The grids, checkpoint settings, algorithm and our blocks (`asor:`, `escp:`, ...), each
+    problem kept in `problems`; whether the configs can be built (grids, algorithm and blocks
+    well formed: building them would only say the same again)."""
+    checks = (_check_grids, _check_checkpoint_config, algorithm_class, validate_asor,
+              validate_blocks)  # fmt: skip
+    passed = {check: problems.passed(check, exp) for check in checks}
+    return passed[_check_grids] and passed[algorithm_class] and passed[validate_blocks]
+
+
+def _check_configs(
+    exp: Experiment, problems: Problems, buildable: bool, evaluation: bool = False
+) -> Any:
+    """`_check_config_points`, or where no config can be built (not `buildable`) the stop keys
+    as far as the algorithm tells; each problem kept in `problems`; the first point's config
+    (None: none built)."""
+    if not buildable:
+        problems.passed(_check_stop_keys, exp, None, evaluation)
+        return None
+    with problems.check():
+        return _check_config_points(exp, evaluation)
+    return None
 
 
 def _check_config_points(exp: Experiment, evaluation: bool = False) -> Any:
-    """Build and validate the AlgorithmConfig of every grid point and check the stop keys;
-    the first point's config."""
+    """Build and validate the AlgorithmConfig of every grid point and check the stop keys
+    (against the algorithm's defaults when no point builds); the first point's config."""
+    problems = Problems()
     cfg = None
     points: list[dict[grid.Path, Any]] = [{}]
     for path, candidates in grid.find_grids(exp.config):
         points += [{path: c} for c in candidates[1:]]
     for choice in points:
-        candidate = build_algo_config(exp, choice)
-        with quiet():
-            try:
-                candidate.validate()
-            except Exception as e:
-                raise UsageError(one_line(e), source=exp.source, key=f"{exp.name}.config") from None
-        cfg = cfg or candidate
-    check_stop(exp, cfg, evaluation)
+        with problems.check():
+            candidate = build_algo_config(exp, choice)
+            with quiet():
+                try:
+                    candidate.validate()
+                except Exception as e:
+                    raise UsageError(
+                        one_line(e), source=exp.source, key=f"{exp.name}.config"
+                    ) from None
+            cfg = cfg or candidate
+    problems.passed(_check_stop_keys, exp, cfg, evaluation)
+    problems.raise_any()
     return cfg
 
 
+def _check_stop_keys(exp: Experiment, cfg: Any, evaluation: bool = False) -> None:
+    """The stop keys against `cfg`, or (None: no config could be built) against the
+    algorithm's defaults and the file's `evaluation_interval`."""
+    if cfg is None:
+        with quiet():
+            cfg = algorithm_class(exp).get_default_config()
+        evaluation = evaluation or bool(exp.config.get("evaluation_interval"))
+    check_stop(exp, cfg, evaluation)
+
+
 def validate(exp: Experiment) -> Any:
-    """Check everything that can be checked before Ray starts; return the first-point config."""
-    check_offline_input(exp)
-    _check_blocks(exp)
-    validate_env(exp)
-    cfg = _check_config_points(exp)
+    """Check everything that can be checked before Ray starts, the stop that `--test`/`--stop`
+    may have supplied included (a UsageError names every problem, one line each); return the
+    first-point config."""
+    problems = Problems()
+    problems.passed(check_offline_input, exp)
+    buildable = _check_blocks(exp, problems)
+    problems.passed(validate_env, exp)  # before the configs: it may rename the env
+    cfg = _check_configs(exp, problems, buildable)
+    problems.passed(require_stop, exp)
+    problems.raise_any()
     _check_env_runner(exp, cfg)
     return cfg
 

@@ -16,7 +16,7 @@ import types
 import typing
 from typing import Any
 
-from rllib_asor.cli.errors import UsageError
+from rllib_asor.cli.errors import Problems, UsageError
 
 _NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 _FRACTIONAL = re.compile(r"^num_(cpus|gpus)(_|$)")
@@ -149,9 +149,11 @@ def check_value(key: str, attr: str, value: Any, default_cfg: Any) -> tuple[Any,
 
 def check_config_values(exp: Any, default_cfg: Any, attr_name: Any) -> None:
     """Check every top-level config value (each grid candidate too) of `exp` in place; a
-    number written as text is replaced by the number with a warning. UsageError otherwise."""
+    number written as text is replaced by the number with a warning. UsageError otherwise
+    (naming every key of a wrong type)."""
     from rllib_asor.cli import grid
 
+    problems = Problems()
     for key, value in list(exp.config.items()):
         attr = attr_name(key)
         is_grid = grid.is_grid(value)
@@ -163,10 +165,11 @@ def check_config_values(exp: Any, default_cfg: Any, attr_name: Any) -> None:
             try:
                 new, note = check_value(key, attr, candidate, default_cfg)
             except ValueError as e:
-                raise UsageError(
-                    str(e), source=exp.source, key=f"{exp.name}.config.{key}"
-                ) from None
+                problems.add(UsageError(str(e), source=exp.source, key=f"{exp.name}.config.{key}"))
+                break  # one line per key
             if note:
                 exp.warnings.append(f"{exp.source}: {exp.name}.config.{key}: {note}")
             fixed.append(new)
-        exp.config[key] = {"grid_search": fixed} if is_grid else fixed[0]
+        else:
+            exp.config[key] = {"grid_search": fixed} if is_grid else fixed[0]
+    problems.raise_any()

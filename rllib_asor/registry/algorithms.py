@@ -21,6 +21,14 @@ ALGORITHMS = {
 """Run name → "module:Class"."""
 
 
+def run_names() -> list[str]:
+    """Every `run:` name, sorted: RLlib's registered algorithms and ours (what `rllib schema`
+    and the CLI's "allowed" lists name)."""
+    from ray.rllib.algorithms.registry import ALGORITHMS as RLLIB
+
+    return sorted(set(RLLIB) | set(ALGORITHMS))
+
+
 def algorithm(name: str) -> type:
     """The Algorithm class of one of our run names."""
     module, _, cls = ALGORITHMS[name].partition(":")

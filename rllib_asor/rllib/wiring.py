@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import warnings
 from typing import Any
 
 from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
@@ -29,7 +30,7 @@ from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
 from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common.callbacks import add_callbacks
-from rllib_asor.algorithms.sac.fast import FLAT_STORAGE
+from rllib_asor.algorithms.sac.fast import FAST_KEY, FLAT_STORAGE
 from rllib_asor.algorithms.sac.learner import FastSACTorchLearner
 from rllib_asor.asor.config import ALGORITHMS, AsorConfig
 from rllib_asor.registry.env_names import register_env
@@ -104,6 +105,7 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
 
     learner_class = asor_learner_class(config, algo)
     _check_infos(config, asor)
+    _note_slow_sac(config, learner_class, asor)
     config = config.copy(copy_frozen=False)
     if isinstance(config.env, str):
         register_env(config.env)  # env runners (other processes, nodes) can then build it
@@ -117,6 +119,28 @@ def with_asor(config: AlgorithmConfig, **settings: Any) -> AlgorithmConfig:
     if config.policies_to_train is not None:  # single-agent configs may set it too
         config.multi_agent(policies_to_train=_AlsoTrainAux(config.policies_to_train))
     return config
+
+
+SLOW_SAC_NOTE = (
+    "with_asor(SACConfig()) wraps RLlib's own SAC Learner, several times slower per env step "
+    "than rllib_asor.FastSACConfig(), the same SAC on the fast off-policy path (docs/speed.md); "
+    "learner_config_dict={'fast_off_policy': False} keeps RLlib's without this note"
+)
+
+
+def _note_slow_sac(config: AlgorithmConfig, learner_class: type, asor: AsorConfig) -> None:
+    """One warning (Python shows it once per place) when ASOR goes on RLlib's own SAC and
+    nothing chose that: not for FastSACConfig, not for a config that records its path
+    (`rllib train`'s `run: SAC` or an opt-out), not where the fast path cannot run ASOR
+    (per-dynamics RND)."""
+    from ray.rllib.algorithms.sac import SAC
+
+    chose = FAST_KEY in (config.learner_config_dict or {})
+    per_dynamics = asor.needs_proxy and asor.proxy == "rnd_per_dynamics"
+    if config.algo_class is SAC and learner_class is AsorSACTorchLearner and not (
+        chose or per_dynamics
+    ):
+        warnings.warn(SLOW_SAC_NOTE, UserWarning, stacklevel=3)
 
 
 def _check_infos(config: AlgorithmConfig, asor: AsorConfig) -> None:

@@ -50,7 +50,8 @@ def test_race_actions_are_not_unsquashed_unless_the_file_asks(tmp_path: Path, gi
 
     path = tmp_path / "x.yaml"
     path.write_text(
-        f"x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  config: {{{given}lr: 0.001}}\n"
+        "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  stop: {training_iteration: 2}\n"
+        f"  config: {{{given}lr: 0.001}}\n"
     )
     config = experiment.validate(experiment.load_file(str(path))[0])
     assert config.normalize_actions is expected and config.clip_actions is False

@@ -10,7 +10,8 @@ import pytest
 
 from rllib_asor.cli.main import main
 
-GOOD_HEAD = "x:\n  env: CartPole-v1\n  run: PPO\n"
+STOP = "  stop: {training_iteration: 2}\n"  # a file with one problem has a stop
+GOOD_HEAD = "x:\n  env: CartPole-v1\n  run: PPO\n" + STOP
 
 
 def _run(capsys, argv):
@@ -35,7 +36,7 @@ def test_unknown_config_key_exits_2_with_file_key_and_allowed(write_yaml, capsys
 
 
 def test_asor_on_an_unsupported_run_names_every_run_it_takes(write_yaml, capsys):
-    path = write_yaml("x:\n  env: CartPole-v1\n  run: DQN\n  config: {asor: {}}\n")
+    path = write_yaml("x:\n  env: CartPole-v1\n  run: DQN\n" + STOP + "  config: {asor: {}}\n")
     rc, err = _run(capsys, ["train", "file", path, "--dry-run"])
     assert rc == 2
     _assert_one_line(err, path, "x.run", "ASOR does not support 'DQN'",
@@ -89,14 +90,15 @@ def test_bad_asor_block_exits_2(write_yaml, capsys, block, fragment):
 
 
 def test_unknown_env_id_exits_2_listing_ours(write_yaml, capsys):
-    path = write_yaml("x:\n  env: NoSuchEnv-v9\n  run: PPO\n")
+    path = write_yaml("x:\n  env: NoSuchEnv-v9\n  run: PPO\n" + STOP)
     rc, err = _run(capsys, ["train", "file", path])
     assert rc == 2
     _assert_one_line(err, path, "x.env", "'NoSuchEnv-v9'", "rllib_asor/LavaWorld-v0", "CartPole-v1")
 
 
 def test_unknown_algorithm_exits_2(write_yaml, capsys):
-    rc, err = _run(capsys, ["train", "file", write_yaml("x:\n  env: CartPole-v1\n  run: PPOO\n")])
+    path = write_yaml("x:\n  env: CartPole-v1\n  run: PPOO\n" + STOP)
+    rc, err = _run(capsys, ["train", "file", path])
     assert rc == 2
     _assert_one_line(err, "x.run", "unknown algorithm 'PPOO'", "PPO")
 
@@ -123,6 +125,8 @@ def test_resume_without_previous_run_exits_2(tmp_path, capsys):
         "CartPole-v1",
         "--storage-path",
         str(tmp_path),
+        "--stop",
+        "training_iteration=2",
         "--resume",
     ]
     rc, err = _run(capsys, argv)
@@ -197,7 +201,7 @@ def test_curriculum_on_a_non_race_env_exits_2(write_yaml, capsys):
 
 
 def test_bad_curriculum_stage_exits_2(write_yaml, capsys):
-    head = "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n"
+    head = "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n" + STOP
     path = write_yaml(head + "  config: {curriculum: {stages: [[2], [12]]}}\n")
     rc, err = _run(capsys, ["train", "file", path])
     assert rc == 2
@@ -231,7 +235,7 @@ def test_version_names_ours_ray_and_torch(capsys):
 @pytest.mark.parametrize("key", ["overlap_sampling", "drop_bootstrap_rows"])
 def test_a_ppo_only_switch_on_another_algorithm_exits_2(write_yaml, capsys, key):
     path = write_yaml(
-        f"x:\n  env: Pendulum-v1\n  run: SAC\n  config: {{learner_config_dict: {{{key}: true}}}}\n"
+        f"x:\n  env: Pendulum-v1\n  run: SAC\n{STOP}  config: {{learner_config_dict: {{{key}: true}}}}\n"
     )
     rc, err = _run(capsys, ["train", "file", path])
     assert rc == 2

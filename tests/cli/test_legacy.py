@@ -110,6 +110,7 @@ def test_rl_module_block_selects_a_registered_module_class(write_yaml):
         x:
           env: CartPole-v1
           run: PPO
+          stop: {training_iteration: 2}
           config:
             rl_module: {module_class: race_net, model_config: {pi_hiddens: [64]}}
             model_config: {vf_hiddens: [32]}

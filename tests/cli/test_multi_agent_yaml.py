@@ -19,6 +19,7 @@ MULTI = """
 x:
   env: game_env/ObstacleRaceMulti-v0
   run: PPO
+  stop: {{training_iteration: 2}}
   config:
     env_config: {{num_racers: 2, max_episode_steps: 20}}
     multi_agent: {block}
@@ -92,7 +93,9 @@ def test_bad_multi_agent_block_is_refused_naming_the_key(write_yaml, block, frag
 def test_race_envs_are_known_to_the_cli_with_race_callbacks(write_yaml):
     assert envs.env_exists("game_env/ObstacleRaceMulti-v0")
     [exp] = experiment.load_file(
-        write_yaml("x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  config: {}\n")
+        write_yaml(
+            "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  stop: {training_iteration: 2}\n"
+        )
     )
     from rllib_asor.race.config import RaceMetricsCallback
 
@@ -103,7 +106,7 @@ def test_race_envs_are_known_to_the_cli_with_race_callbacks(write_yaml):
 def test_race_callbacks_are_not_forced_over_the_files_own(write_yaml):
     [exp] = experiment.load_file(
         write_yaml(
-            "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n"
+            "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  stop: {training_iteration: 2}\n"
             "  config: {callbacks: ray.rllib.callbacks.callbacks.RLlibCallback}\n"
         )
     )
@@ -127,7 +130,7 @@ def test_single_race_env_gets_max_episode_steps_in_its_constructor():
 def test_bad_race_env_config_is_refused_before_ray(write_yaml):
     [exp] = experiment.load_file(
         write_yaml(
-            "x:\n  env: game_env/ObstacleRaceMulti-v0\n  run: PPO\n"
+            "x:\n  env: game_env/ObstacleRaceMulti-v0\n  run: PPO\n  stop: {training_iteration: 2}\n"
             "  config: {env_config: {num_racers: 0}}\n"
         )
     )

@@ -20,8 +20,10 @@ RLLIB = str(Path(sys.executable).with_name("rllib"))
 
 
 def _validated(name: str):
+    """The file's experiment validated as `rllib train` would; a file without `stop:` (our
+    fragments of old files) with `--stop training_iteration=1`, as it must be run now."""
     [exp] = experiment.load_file(str(OLD / name))
-    experiment.apply_overrides(exp)
+    experiment.apply_overrides(exp, stop=None if exp.stop else {"training_iteration": 1})
     return exp, experiment.validate(exp)
 
 
@@ -144,3 +146,24 @@ def test_old_sac_file_trains_with_test(tmp_path):
     )
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     assert "1 trial(s), 0 errored" in proc.stdout
+
+
+def test_rays_pendulum_sac_n_step_3_with_fragment_1_runs_as_old_rllib_ran_it():
+    """Old RLlib raised `rollout_fragment_length` to `n_step` (DQN's validate_config; SAC's
+    from Ray 1.10); RLlib 2.60 refuses the shorter fragment: translated, with one line."""
+    exp, cfg = _validated("pendulum-sac.yaml")
+    assert (cfg.n_step, cfg.rollout_fragment_length) == (3, 3)
+    _warned(exp, "'rollout_fragment_length: 1' translated to 'rollout_fragment_length: 3'",
+            "n_step: 3", "old RLlib")  # fmt: skip
+    assert cfg.model_config["fcnet_hiddens"] == [256, 256]
+    assert exp.stop == {
+        "env_runners/episode_return_mean": -150,
+        "num_env_steps_sampled_lifetime": 30000,
+    }
+
+
+def test_rays_pendulum_sac_passes_the_test_run_checks():
+    """`rllib train file pendulum-sac.yaml --test` as far as Ray's start (no Ray here)."""
+    result = run_cli(["train", "file", str(OLD / "pendulum-sac.yaml"), "--test", "--dry-run"])
+    assert result.rc == 0, result.err[-2000:]
+    assert "'rollout_fragment_length: 1' translated" in result.err

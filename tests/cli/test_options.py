@@ -71,7 +71,8 @@ def test_test_mode_puts_a_gpu_learner_on_the_cpu_when_torch_sees_no_cuda(write_y
 
 
 def test_num_env_runners_and_checkpoint_flags(write_yaml):
-    [exp] = experiment.load_file(write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n"))
+    path = write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  stop: {training_iteration: 2}\n")
+    [exp] = experiment.load_file(path)
     experiment.apply_overrides(exp, num_env_runners=3, checkpoint_freq=4)
     assert experiment.validate(exp).num_env_runners == 3
     assert experiment.checkpoint_kwargs(exp) == {
@@ -87,6 +88,7 @@ def test_grid_search_anywhere_becomes_tune_grid_in_param_space(write_yaml):
         x:
           env: CartPole-v1
           run: PPO
+          stop: {training_iteration: 2}
           config:
             lr: {grid_search: [0.001, 0.0001]}
             lambda: {grid_search: [0.9, 0.95]}

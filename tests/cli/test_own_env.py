@@ -60,7 +60,8 @@ def user(tmp_path_factory):
 
 def _yaml(root: Path, env_name: str, asor: bool = True) -> Path:
     path = root / "work" / f"exp-{abs(hash(env_name))}.yaml"
-    lines = ["own-env:", f"    env: {env_name}", "    run: PPO", "    config:",
+    lines = ["own-env:", f"    env: {env_name}", "    run: PPO",
+             "    stop: {training_iteration: 2}", "    config:",
              "        train_batch_size: 256"]
     path.write_text("\n".join(lines + (["        asor: {seed: 0}"] if asor else [])) + "\n")
     return path
@@ -77,7 +78,8 @@ def test_every_way_of_naming_the_env_validates(user):
     names = ["myenv:MyVarPole-v0", "myenv.VarPoleCartPole", "myenv:VarPoleCartPole"]
     path = root / "work" / "forms.yaml"
     path.write_text("".join(
-        f"form{i}:\n    env: {name}\n    run: PPO\n    config: {{asor: {{seed: 0}}}}\n"
+        f"form{i}:\n    env: {name}\n    run: PPO\n    stop: {{training_iteration: 1}}\n"
+        "    config: {asor: {seed: 0}}\n"
         for i, name in enumerate(names)
     ))  # fmt: skip
     proc = _rllib(["train", "file", str(path), "--dry-run"], env, root / "work")

@@ -100,12 +100,24 @@ pendulum-sac:
 
 
 @pytest.mark.parametrize("extra", [[], ["--test"]])
-def test_n_step_longer_than_the_fragment_is_one_line_naming_both(write_yaml, capsys, extra):
-    """Ray's old pendulum-sac.yaml: RLlib's own check fails with "'int' object is not
-    subscriptable" (its message indexes an int n_step); `--test` (fragment 'auto') hid it."""
+def test_n_step_longer_than_the_fragment_runs_as_old_rllib_ran_it(write_yaml, capsys, extra):
+    """Ray's old pendulum-sac.yaml: old RLlib raised the fragment to n_step, RLlib 2.60's own
+    check refuses it (with "'int' object is not subscriptable": its message indexes an int
+    n_step). The fragment is raised, with one warning line (tests/cli/test_old_files.py)."""
     path = write_yaml(SAC_N_STEP)
+    assert main(["train", "file", path, "--dry-run", *extra]) == 0
+    err = capsys.readouterr().err
+    assert err.count("'rollout_fragment_length: 1' translated to 'rollout_fragment_length: 3'") == 1
+
+
+@pytest.mark.parametrize("extra", [[], ["--test"]])
+def test_a_grid_of_n_step_longer_than_the_fragment_is_one_line_naming_both(
+    write_yaml, capsys, extra
+):
+    """A grid has no one fragment old RLlib would have used: refused, naming both keys."""
+    path = write_yaml(SAC_N_STEP.replace("n_step: 3", "n_step: {grid_search: [1, 3]}"))
     line = _refused(capsys, ["train", "file", path, "--dry-run", *extra],
-                    "pendulum-sac.config.n_step", "n_step: 3", "rollout_fragment_length: 1",
+                    ".config.n_step:", "n_step: 3", "rollout_fragment_length: 1",
                     "allowed: rollout_fragment_length: auto or an integer >= 3")  # fmt: skip
     assert "subscriptable" not in line
 

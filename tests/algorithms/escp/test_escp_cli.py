@@ -15,7 +15,7 @@ EXAMPLES = Path(__file__).resolve().parents[3] / "tuned_examples" / "mujoco"
 def _yaml(tmp_path: Path, run: str, block: str) -> str:
     path = tmp_path / "exp.yaml"
     path.write_text(
-        f"x:\n  env: rllib_asor/HalfCheetahShift-v0\n  run: {run}\n"
+        f"x:\n  env: rllib_asor/HalfCheetahShift-v0\n  run: {run}\n  stop: {{training_iteration: 2}}\n"
         f"  config:\n    env_config: {{num_tasks: 4}}\n{block}"
     )
     return str(path)

@@ -16,7 +16,7 @@ def _yaml(tmp_path: Path, run: str, block: str, input_: str | None = None) -> st
     data = input_ or str(tmp_path)
     path = tmp_path / "exp.yaml"
     path.write_text(
-        f"x:\n  env: rllib_asor/HopperShift-v0\n  run: {run}\n"
+        f"x:\n  env: rllib_asor/HopperShift-v0\n  run: {run}\n  stop: {{training_iteration: 2}}\n"
         f"  config:\n    input: [{data}]\n{block}"
     )
     return str(path)
