@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import time
 from collections.abc import Iterator, Mapping
@@ -51,8 +52,15 @@ def describe(exp: Any, smoke: bool) -> dict[str, Any]:
 
 
 def canonical(value: Any) -> Any:
-    """`value` as JSON would give it back (tuples as lists, keys as strings)."""
-    return json.loads(json.dumps(value, sort_keys=True, default=repr))
+    """`value` as JSON would give it back (tuples as lists, keys as strings); a function or
+    class as its import path, any other object as its repr without memory addresses."""
+    return json.loads(json.dumps(value, sort_keys=True, default=_stable))
+
+
+def _stable(obj: Any) -> str:
+    if hasattr(obj, "__qualname__") and hasattr(obj, "__module__"):
+        return f"{obj.__module__}.{obj.__qualname__}"
+    return re.sub(r" at 0x[0-9a-fA-F]+", "", repr(obj))
 
 
 def _flat(value: Any, prefix: str = "") -> Iterator[tuple[str, Any]]:

@@ -132,8 +132,6 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
     exps = load_experiments(args, problems)
     configs = []
     for exp in exps:
-        if args.test and not args.name:
-            exp.name += manifest.SMOKE_SUFFIX  # smoke runs never share a folder with real runs
         with problems.check():  # every problem of every experiment at once
             experiment.check_file(exp)  # as written, before --test/--stop replace anything
         with problems.check():  # what the run adds (a missing stop, the env), once each
@@ -152,11 +150,14 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
 
         print_experiments(exps)
         return []
-    resumes = [_prepare_folder(exp, args) for exp in exps]
     from rllib_asor.cli.cluster import probe, start_ray
 
     if args.address:
         probe(args.address)  # fail fast (exit 2) before anything else is printed
+    for exp in exps:
+        if args.test and not args.name:
+            exp.name += manifest.SMOKE_SUFFIX  # smoke runs never share a folder with real runs
+    resumes = [_prepare_folder(exp, args) for exp in exps]
     for exp in exps:
         for warning in dict.fromkeys(exp.warnings):
             print(f"rllib: warning: {warning}", file=sys.stderr)

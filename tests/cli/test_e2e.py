@@ -89,7 +89,7 @@ def test_train_prints_legacy_warnings_progress_lines_and_summary(cartpole):
     progress = [line for line in cartpole.out.splitlines() if line.startswith("[0] it ")]
     assert progress and all(len(line) <= 100 for line in progress)
     assert " steps " in progress[-1] and " return " in progress[-1]
-    assert "rllib: cartpole-legacy: 1 trial(s), 0 errored" in cartpole.out
+    assert "rllib: cartpole-legacy-test: 1 trial(s), 0 errored" in cartpole.out
     assert "checkpoint=" + str(cartpole.exp_dir) in cartpole.out
 
 

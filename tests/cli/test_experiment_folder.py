@@ -132,3 +132,19 @@ def test_ab_differences_are_named_once_for_both_arms_and_per_arm_otherwise(tmp_p
     text = str(e.value)
     assert "config.lr: 0.0003 -> 0.001;" in text and "arms." not in text
     assert "PPO+ASOR: asor.lambda_: 0.1 -> 0.3" in text
+
+
+def test_a_config_holding_functions_or_objects_matches_its_own_record_again() -> None:
+    def connector(env, spaces, device):  # a config value whose repr names a memory address
+        return None
+
+    class Thing:
+        pass
+
+    exp = type("Exp", (), {"run": "PPO", "env": "CartPole-v1", "stop": {}, "asor": None,
+                           "num_samples": 1, "checkpoint_config": {},
+                           "config": {"env_to_module_connector": connector, "x": Thing()}})()  # fmt: skip
+    first = manifest.describe(exp, smoke=False)
+    exp.config = {"env_to_module_connector": connector, "x": Thing()}
+    assert manifest.describe(exp, smoke=False) == first
+    assert "0x" not in json.dumps(first)
