@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from rllib_asor.cli.errors import UsageError
+from rllib_asor.cli.errors import Problems, UsageError
 from rllib_asor.cli.evaluate import EVAL_SEED  # the env seed of the final evaluation
 
 DEFAULT_STORAGE = "~/ray_results"
@@ -153,21 +153,27 @@ def _prepare(exp: Any, args: argparse.Namespace) -> Any:
     from rllib_asor.cli import experiment
     from rllib_asor.evaluation.dynamics import DynamicsReturnsCallback
 
-    experiment.check_file(exp, evaluation=True)  # as written, before --test/--stop replace it
-    experiment.apply_overrides(
-        exp,
-        test=args.test,
-        num_env_runners=args.num_env_runners,
-        stop=experiment.parse_stop_flags(args.stop),
-    )
-    cfg = exp.config
-    iterations = exp.stop.get("training_iteration")
-    default = 1 if args.test else min(5, int(iterations)) if iterations else 5
-    cfg["evaluation_interval"] = args.eval_interval or cfg.get("evaluation_interval") or default
-    cfg.setdefault("evaluation_duration", 2 if args.test else 10)
-    cfg["evaluation_config"] = {"explore": False, **(cfg.get("evaluation_config") or {})}
-    cfg["seed"] = 0
-    algo_config = experiment.validate(exp)
+    problems = Problems()  # every problem of the file at once, as `rllib train` reports them
+    with problems.check():
+        experiment.check_file(exp, evaluation=True)  # as written, before --test/--stop
+    with problems.check():
+        experiment.apply_overrides(
+            exp,
+            test=args.test,
+            num_env_runners=args.num_env_runners,
+            stop=experiment.parse_stop_flags(args.stop),
+        )
+        cfg = exp.config
+        iterations = exp.stop.get("training_iteration")
+        default = 1 if args.test else min(5, int(iterations)) if iterations else 5
+        cfg["evaluation_interval"] = (
+            args.eval_interval or cfg.get("evaluation_interval") or default
+        )
+        cfg.setdefault("evaluation_duration", 2 if args.test else 10)
+        cfg["evaluation_config"] = {"explore": False, **(cfg.get("evaluation_config") or {})}
+        cfg["seed"] = 0
+        algo_config = experiment.validate(exp)
+    problems.raise_any()
     add_callbacks(algo_config, DynamicsReturnsCallback)
     return algo_config
 

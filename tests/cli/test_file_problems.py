@@ -95,3 +95,14 @@ def test_an_unknown_run_lists_every_name_the_schema_takes(write_yaml, capsys):
     listed = line.split("allowed: ", 1)[1].split(", ")
     assert listed == run_names()
     assert {"FastSAC", "ESCP", "MAPLE", "MOPO", "OSI", "CaDM", "PPO", "SAC"} <= set(listed)
+
+
+def test_rllib_ab_reports_every_problem_of_its_file_at_once(write_yaml, capsys, tmp_path):
+    path = write_yaml(
+        "x:\n  env: CartPole-v1\n  run: PPO\n"
+        "  config: {gamma: high, asor: {seed: 0}}\n"
+    )
+    argv = ["ab", path, "--seeds", "2", "--storage-path", str(tmp_path / "results")]
+    lines = _error_lines(capsys, argv)
+    assert any("x.config.gamma" in line for line in lines), lines
+    assert any("x.stop" in line for line in lines), lines
