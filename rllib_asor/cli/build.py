@@ -213,7 +213,7 @@ def _fast_path(cfg: Any, exp: Experiment) -> Any:
     opts out with `learner_config_dict: {fast_off_policy: false}` or its asor block trains
     per-dynamics RND. Both arms of a comparison get the same path (`with_asor` never changes
     it); a `run: SAC`/`CQL` file says which once."""
-    from rllib_asor.algorithms.sac.fast import FAST_KEY, fast_off_policy
+    from rllib_asor.algorithms.sac.fast import FAST_KEY, FLAT_STORAGE, fast_off_policy
 
     per_dynamics = per_dynamics_rnd(exp)
     if exp.run == "FastSAC":
@@ -236,12 +236,22 @@ def _fast_path(cfg: Any, exp: Experiment) -> Any:
             "does not keep",
         )
         return cfg
+    fast = fast_off_policy(cfg)
+    if exp.run == "SAC" and (fast.replay_buffer_config or {}).get("storage") != FLAT_STORAGE:
+        _say_once(
+            exp.run,
+            f"run: SAC gets the fast path's critics only (docs/speed.md): with n_step "
+            f"{fast.n_step}, {(fast.replay_buffer_config or {}).get('type')} replay"
+            f"{' and several agents' if fast.is_multi_agent else ''} it keeps RLlib's replay "
+            f"and Learner; learner_config_dict: {{{FAST_KEY}: false}} gives RLlib's own SAC",
+        )
+        return fast
     _say_once(
         exp.run,
         f"run: {exp.run} runs on the fast off-policy path (docs/speed.md), with and without "
         f"ASOR; learner_config_dict: {{{FAST_KEY}: false}} gives RLlib's own {exp.run}",
     )
-    return fast_off_policy(cfg)
+    return fast
 
 
 def _say_once(run: str, note: str) -> None:

@@ -167,3 +167,14 @@ def test_rays_pendulum_sac_passes_the_test_run_checks():
     result = run_cli(["train", "file", str(OLD / "pendulum-sac.yaml"), "--test", "--dry-run"])
     assert result.rc == 0, result.err[-2000:]
     assert "'rollout_fragment_length: 1' translated" in result.err
+
+
+def test_sac_with_n_step_3_is_not_said_to_run_on_the_whole_fast_path():
+    """n_step 3 keeps RLlib's replay and Learner: the note says only the critics are fast."""
+    proc = subprocess.run(  # a fresh process: the note is said once per process
+        [RLLIB, "train", "file", str(OLD / "pendulum-sac.yaml"), "--test", "--dry-run"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "run: SAC gets the fast path's critics only" in proc.stderr
+    assert "n_step 3" in proc.stderr and "runs on the fast off-policy path" not in proc.stderr
