@@ -57,10 +57,20 @@ def scaling_json(device: str, e2e: dict[tuple[str, int], float], learner: float)
 
 
 def test_targets_are_judged_on_cuda_only() -> None:
-    e2e = {("ppo", 1): 600.0, ("asor", 1): 500.0, ("ppo", 14): 5000.0, ("asor", 14): 4400.0}
-    rows = summary.targets(scaling_json("cuda", e2e, 12_000.0), None)
-    assert [r[3] for r in rows] == ["met", "met", "NOT met"]  # 8.8x, 12,000, 0.88
-    assert rows[0][1] == "8.80" and rows[2][1] == "0.88"
+    e2e = {("ppo", 1): 1_600.0, ("asor", 1): 1_500.0, ("ppo", 14): 16_500.0,
+           ("asor", 14): 14_500.0}  # fmt: skip
+    data = scaling_json("cuda", e2e, 12_000.0)
+    for row in data["rows"]:
+        row["sample"] = {1: 3_100.0, 14: 28_000.0}[row["runners"]]
+    rows = {r[0]: r for r in summary.targets(data, None)}
+    assert rows["PPO+ASOR end to end, 14 runners (env steps/s)"][1:] == [
+        "14,500", "≥ 15,000", "NOT met"]  # fmt: skip
+    assert rows["PPO end to end, 14 runners (env steps/s)"][3] == "met"
+    assert rows["PPO+ASOR ÷ PPO end to end, 14 runners"][1:] == ["0.88", "≥ 0.9", "NOT met"]
+    assert rows["PPO+ASOR end to end, 14 ÷ 1 runners"][1] == "9.67"
+    assert rows["sampling only, 1 runner(s) (env steps/s)"][3] == "met"
+    assert rows["sampling only, 14 runners (env steps/s)"][3] == "NOT met"
+    assert rows["Learner alone, best (env steps/s)"][3] == "met"
     rows = summary.targets(scaling_json("cpu", e2e, 12_000.0), None)
     assert {r[3] for r in rows} == {"not judged (CPU)"}
 
