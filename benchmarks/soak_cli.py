@@ -29,7 +29,11 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 AB_FILE = "tuned_examples/lava/ppo-asor.yaml"
 TRACEBACK = re.compile(r"^Traceback \(most recent call last\):", re.M)
-RAY_PREFIX = re.compile(r"^\([^)\n]*pid=\d+[^)\n]*\) ?", re.M)  # "(EnvRunner pid=12, ip=..) "
+IGNORED = re.compile(r"^Exception ignored in.*\n(?!Traceback)(.*)", re.M)  # no frames shown
+ANSI = re.compile(r"\x1b\[[0-9;]*m")  # Ray colours the prefix even into a pipe
+# "(EnvRunner pid=12, ip=..) ", also "(AsorPPO(env=...; multi-agent=False) pid=12) ": an actor
+# prefix is its repr, which may hold parentheses
+RAY_PREFIX = re.compile(r"^\((?:[^\n]*? )?pid=\d+(?:, ip=[^)\n]*)?\) ?", re.M)
 
 
 def commands(only: str | None) -> list[tuple[str, list[str]]]:
@@ -45,14 +49,16 @@ def commands(only: str | None) -> list[tuple[str, list[str]]]:
 
 def tracebacks(text: str) -> list[str]:
     """The last line of each Python traceback in `text` (the exception it ended with), also of
-    those Ray relays from its workers with a `(name pid=N)` prefix on every line."""
+    those Ray relays from its workers with a `(name pid=N)` prefix on every line, and of each
+    "Exception ignored in ..." that Python printed without frames."""
     found = []
-    text = RAY_PREFIX.sub("", text)
+    text = RAY_PREFIX.sub("", ANSI.sub("", text))
     for m in TRACEBACK.finditer(text):
         lines = text[m.end() :].splitlines()
         # the exception line: the first non-indented line after the frames
         last = next((ln for ln in lines[1:] if ln and not ln.startswith((" ", "\t"))), "?")
         found.append(last.strip()[:300])
+    found += [m.group(1).strip()[:300] or "?" for m in IGNORED.finditer(text)]
     return found
 
 

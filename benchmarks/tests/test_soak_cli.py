@@ -17,6 +17,26 @@ def test_each_traceback_is_found_with_its_exception_line():
     assert soak_cli.tracebacks("rllib: x.stop.foo: not a metric PPO reports") == []
 
 
+def test_tracebacks_ray_relays_in_colour_and_from_actors_with_a_repr_are_found():
+    # as Ray printed them into a pipe (issue 52): the prefix in ANSI colour, the trainable's
+    # prefix its repr with parentheses of its own
+    runner = "\x1b[36m(SingleAgentEnvRunner pid=21063)\x1b[0m "
+    trainable = "\x1b[36m(AsorPPO(env=x; env-runners=2; multi-agent=False) pid=13779)\x1b[0m "
+    text = "".join(
+        prefix + line + "\n"
+        for prefix in (runner, trainable)
+        for line in (
+            "Exception ignored in: <function EnvRunner.__del__ at 0x7f>",
+            "Traceback (most recent call last):",
+            '  File "ray/rllib/env/env_runner.py", line 212, in __del__',
+            "SystemExit: 1",
+        )
+    )
+    assert soak_cli.tracebacks(text) == ["SystemExit: 1", "SystemExit: 1"]
+    frameless = "(X pid=3) Exception ignored in: <function f at 0x1>\n(X pid=3) SystemExit: 1\n"
+    assert soak_cli.tracebacks(frameless) == ["SystemExit: 1"]
+
+
 def test_every_tuned_example_and_ab_are_soaked():
     names = [n for n, _ in soak_cli.commands(None)]
     assert "lava__ppo-asor" in names and "race__ppo-asor" in names and names[-1].startswith("ab__")

@@ -13,7 +13,14 @@ from typing import Any
 
 from ray.rllib.callbacks.callbacks import RLlibCallback
 
+from rllib_asor.algorithms.common import actor_shutdown
 from rllib_asor.rllib.learners import DISC_PREFIX, PROXY_PREFIX
+
+# Every trainable the CLI or `with_asor` builds unpickles one of the callbacks below, so this
+# runs in its process: its env runners are dead before its `stop()` returns and Tune frees the
+# trial's placement group, and in a Ray actor a SIGTERM never raises inside a finalizer (no
+# "Exception ignored ... SystemExit: 1" at shutdown; actor_shutdown's docstring has the cause).
+actor_shutdown.install()
 
 ASOR_METRICS = frozenset(
     {
