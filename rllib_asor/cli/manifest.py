@@ -18,6 +18,7 @@ to a folder of real runs, and each one starts that folder over.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import re
@@ -34,7 +35,11 @@ RECORD_FILE = "rllib_asor_experiment.json"
 SMOKE_SUFFIX = "-test"
 MAX_SHOWN = 4
 """Differences named in the refusal (the rest are counted)."""
+LOCK_FILE = ".rllib_asor.lock"
+"""Held (flock) by the command running in the folder, for the life of its process."""
 _MISSING = object()
+_HELD: dict[str, int] = {}
+"""Folder -> the open lock file of a folder this process runs in."""
 
 
 def describe(exp: Any, smoke: bool) -> dict[str, Any]:
@@ -110,8 +115,8 @@ def ways_out() -> str:
 
 
 def holds_results(path: str) -> bool:
-    """Whether the folder holds anything (a Tune experiment, trials, a record)."""
-    return os.path.isdir(path) and any(os.scandir(path))
+    """Whether the folder holds anything (a Tune experiment, trials, a record) but its lock."""
+    return os.path.isdir(path) and any(e.name != LOCK_FILE for e in os.scandir(path))
 
 
 def refuse_changed(path: str, held: Mapping[str, Any], wanted: Mapping[str, Any]) -> None:
@@ -121,9 +126,7 @@ def refuse_changed(path: str, held: Mapping[str, Any], wanted: Mapping[str, Any]
         return
     shown = "; ".join(diffs[:MAX_SHOWN])
     more = f" (and {len(diffs) - MAX_SHOWN} more)" if len(diffs) > MAX_SHOWN else ""
-    raise UsageError(
-        f"holds a different experiment: {shown}{more}; {ways_out()}", source=path
-    )
+    raise UsageError(f"holds a different experiment: {shown}{more}; {ways_out()}", source=path)
 
 
 def _per_arm(diffs: list[str], arms: Mapping[str, Any]) -> list[str]:
@@ -170,6 +173,7 @@ def start_smoke(path: str) -> None:
             "allowed: --name NAME (another folder)",
             source=path,
         )
+    _release(path)
     shutil.rmtree(path, ignore_errors=True)
 
 
@@ -177,16 +181,46 @@ def _is_smoke(record: Mapping[str, Any]) -> bool:
     return any(v is True for k, v in _flat(record) if k == "smoke" or k.endswith(".smoke"))
 
 
+def _release(path: str) -> None:
+    fd = _HELD.pop(os.path.abspath(path), None)
+    if fd is not None:
+        os.close(fd)
+
+
+def lock(path: str) -> None:
+    """Hold the folder's lock for the rest of this process (UsageError when another process
+    holds it: a command running in that folder now)."""
+    key = os.path.abspath(path)
+    if key in _HELD:
+        return
+    os.makedirs(path, exist_ok=True)
+    fd = os.open(os.path.join(path, LOCK_FILE), os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise UsageError(
+            "another rllib command is running in this folder now; allowed: wait for it to end, "
+            "or --name NAME (another folder)",
+            source=path,
+        ) from None
+    _HELD[key] = fd
+
+
 def prepare(
     path: str, wanted: Mapping[str, Any], *, fresh: bool, smoke: bool
 ) -> tuple[dict[str, Any], bool]:
     """Make the folder `path` ready for a run of `wanted` (UsageError when it holds another
-    experiment, compared without ``seeds``). Returns the record the run goes on from (`wanted`,
-    with the held ``seeds`` when resumed) and whether the folder holds that experiment already."""
+    experiment, compared without ``seeds``, or another process runs in it now). Returns the
+    record the run goes on from (`wanted`, with the held ``seeds`` when resumed) and whether the
+    folder holds that experiment already. The folder stays locked while this process lives."""
     record = dict(wanted)
+    if os.path.isdir(path):
+        lock(path)  # nothing is moved or removed under a running command
     if smoke:
         start_smoke(path)
     elif fresh:
+        _release(path)
         moved = move_aside(path)
         if moved:
             print(f"rllib: --fresh: the previous results moved to {moved}", flush=True)
@@ -199,6 +233,7 @@ def prepare(
             record = {**held, **wanted, "seeds": held.get("seeds", [])}
             write(path, record)
             return record, True
+    lock(path)
     write(path, record)
     return record, False
 

@@ -206,6 +206,7 @@ def _prepare_folder(exp: experiment.Experiment, args: argparse.Namespace) -> boo
     if args.resume and manifest.read(path) is None:
         print(f"rllib: warning: {path} holds no record of what was run; resumed unchecked, as "
               "--resume asks", file=sys.stderr)  # fmt: skip
+        manifest.lock(path)
         manifest.write(path, wanted)
         return True
     _, same = manifest.prepare(path, wanted, fresh=args.fresh, smoke=args.test)

@@ -148,3 +148,27 @@ def test_a_config_holding_functions_or_objects_matches_its_own_record_again() ->
     exp.config = {"env_to_module_connector": connector, "x": Thing()}
     assert manifest.describe(exp, smoke=False) == first
     assert "0x" not in json.dumps(first)
+
+
+def test_a_folder_another_command_runs_in_is_neither_resumed_nor_removed(tmp_path) -> None:
+    import subprocess
+    import sys
+
+    folder = tmp_path / "tiny-test"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import sys, time; from rllib_asor.cli import manifest; "
+         f"manifest.prepare({str(folder)!r}, {{'smoke': True}}, fresh=False, smoke=True); "
+         "print('held', flush=True); time.sleep(60)"],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        for kw in ({"fresh": False, "smoke": True}, {"fresh": True, "smoke": False}):
+            with pytest.raises(UsageError, match="another rllib command is running"):
+                manifest.prepare(str(folder), {"smoke": kw["smoke"]}, **kw)
+        assert manifest.read(str(folder)) == {"smoke": True}
+    finally:
+        holder.kill()
+        holder.wait()
+    # the holder gone, its lock goes with it: a new smoke run starts the folder over
+    assert manifest.prepare(str(folder), {"smoke": True}, fresh=False, smoke=True)[1] is False
