@@ -6,7 +6,7 @@ Reads OUT/gpu_tests.xml (pytest's junit report), OUT/e2e/scaling.json (sampling 
 end), OUT/learner/scaling.json (the Learner alone) and OUT/split/scaling.json (where an
 iteration's time goes, and the weight sync), all from `benchmarks.scaling` at minibatch
 2,048; a missing file is a row or a line that says so. The
-targets are those for a 16-core node with one GPU (issue 53): at the most runners (14) PPO+ASOR
+targets are those for a 16-core node with one GPU: at the most runners (14) PPO+ASOR
 end to end ≥ 15,000 env steps/s and PPO ≥ 16,000, PPO+ASOR ÷ PPO ≥ 0.9, 14 ÷ 1 runners ≥ 10×;
 sampling only ≥ 3,000 (one runner) and ≥ 30,000 (14); the GPU Learner alone ≥ 10,000. On a CPU
 they are shown, not judged.
@@ -52,7 +52,7 @@ def fmt(x: float | None, digits: int = 0) -> str:
 
 
 def targets(e2e: dict[str, Any] | None, learner: dict[str, Any] | None) -> list[list[str]]:
-    """Rows (check, measured, target, verdict) of the GPU node's targets (issue 53: a 16-core
+    """Rows (check, measured, target, verdict) of the GPU node's targets (a 16-core
     node with one GPU, 14 runners)."""
     counts = sorted({r["runners"] for r in (e2e or {}).get("rows", [])})
     cuda = (e2e or learner or {}).get("settings", {}).get("device") == "cuda"

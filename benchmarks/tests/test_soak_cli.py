@@ -18,7 +18,7 @@ def test_each_traceback_is_found_with_its_exception_line():
 
 
 def test_tracebacks_ray_relays_in_colour_and_from_actors_with_a_repr_are_found():
-    # as Ray printed them into a pipe (issue 52): the prefix in ANSI colour, the trainable's
+    # as Ray printed them into a pipe: the prefix in ANSI colour, the trainable's
     # prefix its repr with parentheses of its own
     runner = "\x1b[36m(SingleAgentEnvRunner pid=21063)\x1b[0m "
     trainable = "\x1b[36m(AsorPPO(env=x; env-runners=2; multi-agent=False) pid=13779)\x1b[0m "

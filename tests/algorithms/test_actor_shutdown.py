@@ -1,4 +1,4 @@
-"""Env runners are dead before a trainable's `stop()` returns (issue 52, item 5).
+"""Env runners are dead before a trainable's `stop()` returns.
 
 The traceback `(SingleAgentEnvRunner pid=…) Exception ignored in: <function EnvRunner.__del__>
 … SystemExit: 1` came from RLlib's `FaultTolerantActorManager.clear()` returning while its

@@ -1,4 +1,4 @@
-"""What a file gets wrong is said at once and plainly (issue 52, item 6): a missing `stop:` is
+"""What a file gets wrong is said at once and plainly: a missing `stop:` is
 refused unless `--test` or `--stop` supplies one, every problem of a file is one line of its own
 in one report, and the `run:` names allowed are the registry's (RLlib's and ours)."""
 

@@ -1,4 +1,4 @@
-"""Issue 52: an answer you can trust. Per-dynamics rows carry their pair and episode counts and
+"""Per-dynamics rows carry their pair and episode counts and
 are decided only after a Holm adjustment (the plot stars the same rows); no verdict where an
 arm never trained, ASOR never ran or the runs are smoke runs; a folder without evaluations does
 not switch every score to training returns; `differs in:` hides bookkeeping and never cuts a
@@ -42,7 +42,7 @@ def asor_params(seed: int, **more: Any) -> dict[str, Any]:
     return base_params(seed, asor={"mode": "asor"}, **more)
 
 
-# ------------------------------------------------------------------ item 2: per dynamics
+# ------------------------------------------------------------------ per dynamics
 
 SEEDS = 8
 EFFECTS = {  # dynamics id -> the paired difference per seed (treatment - baseline)
@@ -162,7 +162,7 @@ def test_dynamics_without_evaluation_episodes_are_listed(tmp_path: Path) -> None
     assert "7 (in training, in no evaluation)" in text
 
 
-# ------------------------------------------------------------------ item 3: no verdict
+# ------------------------------------------------------------------ no verdict
 
 
 def ab_pairs(root: Path, seeds: int, base_extra: dict, treat_extra: dict, **params: Any) -> Path:
@@ -238,7 +238,7 @@ def test_a_folder_without_evaluations_keeps_the_others_on_evaluation_scores(
     assert "6 trial(s)" in note and all(f"{a}{s}" in note for a in "ab" for s in range(4, 7))
 
 
-# ------------------------------------------------------------------ item 4: one account
+# ------------------------------------------------------------------ one account
 
 
 def test_differs_in_hides_bookkeeping_and_says_only_asor(tmp_path: Path) -> None:

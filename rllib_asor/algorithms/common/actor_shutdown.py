@@ -1,7 +1,7 @@
 """RLlib's actor managers stop their actors synchronously: dead before `stop()` returns.
 
 The cause of the `(SingleAgentEnvRunner pid=…) Exception ignored in: <function
-EnvRunner.__del__> … SystemExit: 1` traceback at the end of a Tune trial (issue 52, item 5),
+EnvRunner.__del__> … SystemExit: 1` traceback at the end of a Tune trial,
 read off Ray's own logs of runs that printed it:
 
 1. `Algorithm.cleanup` -> `EnvRunnerGroup.stop()` -> `FaultTolerantActorManager.clear()`
