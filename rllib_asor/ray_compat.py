@@ -63,16 +63,6 @@ PRIVATE_NAMES: tuple[Private, ...] = (
     ),
     Private(_LEARNER, "_weights_seq_no", "the weights' version, to log off-policyness once"),
     Private(
-        "ray.rllib.utils.minibatch_utils:MiniBatchCyclicIterator",
-        "_batch",
-        "the iterator's batch, to drop an aux module that finished its rows",
-    ),
-    Private(
-        "ray.rllib.utils.minibatch_utils:MiniBatchCyclicIterator",
-        "_num_covered_epochs",
-        "the iterator's per-module epoch count, to stop tracking a dropped module",
-    ),
-    Private(
         "ray.rllib.core.learner.learner_group",
         "_get_backend_config",
         "the Learner group's torch backend factory, wrapped to use gloo on a shared GPU",
@@ -113,9 +103,9 @@ PRIVATE_NAMES: tuple[Private, ...] = (
 """Every private Ray name this module reads or writes, with what we use it for."""
 
 OVERRIDES: tuple[Private, ...] = (
-    Private(_LEARNER, "_update", "one minibatch's update: ASOR caps aux passes, SAC/ESCP extras"),
+    Private(_LEARNER, "_update", "one minibatch's update: offline ASOR's piece, SAC/ESCP/MAPLE extras"),
     Private(_LEARNER, "_make_batch_if_necessary", "flat replay batches; no_grad connectors"),
-    Private(_LEARNER, "_create_iterator_if_necessary", "the policy's minibatch count with ASOR"),
+    Private(_LEARNER, "_create_iterator_if_necessary", "the fast path's minibatches of its flat batches"),
     Private(_TORCH_LEARNER, "_compute_off_policyness", "the metric once per update"),
     Private(_CONFIG, "_model_config_auto_includes", "ESCP/MAPLE settings into model_config"),
     Private(
@@ -195,16 +185,6 @@ def temp_losses(learner: Any) -> dict[tuple[str, str], Any]:
 def weights_seq_no(learner: Any) -> int:
     """The version of the weights the Learner last got from the sampler."""
     return learner._weights_seq_no
-
-
-def iterator_batch(batch_iter: Any) -> Any:
-    """The `MultiAgentBatch` a `MiniBatchCyclicIterator` slices."""
-    return batch_iter._batch
-
-
-def iterator_covered_epochs(batch_iter: Any) -> dict[str, int]:
-    """A `MiniBatchCyclicIterator`'s module id -> epochs covered (it runs until all reach N)."""
-    return batch_iter._num_covered_epochs
 
 
 def local_learner(learner_group: Any) -> Any:

@@ -181,7 +181,8 @@ def asor_update(
         counts = proxy.count(proxy_in)
     # 3. The real set D_P, and the discriminator's train batch.
     rho_value, rho_count = cfg.effective_rhos
-    if state.archive is not None and batch.chunks is not None:
+    from_archive = state.archive is not None and batch.chunks is not None
+    if from_archive:
         _archive_episodes(state.archive, batch)
         cand, cand_rtg = state.archive.sample(n, _torch_generator(rng))
         cand_counts = None
@@ -208,14 +209,6 @@ def asor_update(
         batch_real = partition(batch.values, counts, rho_value, rho_count, mode=cfg.mode, rng=rng)
         disc_feats, labels = feats, batch_real.float()
     has_real = bool((labels > 0.5).any())
-    # 4. ω(s) on the batch, before this update's discriminator step.
-    state.disc.observe(disc_feats)
-    logits = state.disc(feats)
-
-    # 5. The bonus b(s) (with potential shaping, b is the potential Φ).
-    raw = _raw_bonus(cfg, logits)
-    normalise = _bonus_normaliser(cfg, state, raw, update_running=True)
-    bonus = potential_of = normalise(raw)
     potential = cfg.shaping == "potential"
     if potential and (batch.next_features is None or batch.terminateds is None):
         _warn_once(
@@ -223,13 +216,33 @@ def asor_update(
             "module's padded batch?); using the direct form r + λ·b(s)"
         )
         potential = False
+    # 4. ω on the batch, before this update's discriminator step: one pass over s, s′ (the
+    #    potential) and, for λ="auto", the archive's real states (the JS estimate on D_P ∪ D_Q).
+    state.disc.observe(disc_feats)
+    auto = cfg.lambda_ == "auto"
+    extra = disc_feats[labels > 0.5] if auto and from_archive else None
+    parts = [feats]
+    parts += [batch.next_features] if potential else []
+    parts += [extra] if extra is not None else []
+    out = state.disc(torch.cat(parts)) if len(parts) > 1 else state.disc(feats)
+    logits = out[:n]
+
+    # 5. The bonus b(s) (with potential shaping, b is the potential Φ).
+    raw = _raw_bonus(cfg, logits)
+    normalise = _bonus_normaliser(cfg, state, raw, update_running=True)
+    bonus = potential_of = normalise(raw)
     if potential:
-        next_bonus = normalise(_raw_bonus(cfg, state.disc(batch.next_features)))
+        next_bonus = normalise(_raw_bonus(cfg, out[n : 2 * n]))
         bonus = potential_shaping(bonus, next_bonus, batch.terminateds, batch.gamma)
     # 6. λ for this batch ("auto": from the discriminator's JS estimate on its own batch).
     js = float("nan")
-    if cfg.lambda_ == "auto":
-        _, disc_stats = discriminator_loss(state.disc(disc_feats), labels)
+    if auto:
+        if extra is None:  # D_P is the batch's top: its own rows and labels
+            js_logits, js_labels = logits, labels
+        else:  # D_P from the archive, D_Q the batch
+            js_logits = torch.cat([out[out.shape[0] - extra.shape[0] :], logits])
+            js_labels = torch.cat([labels.new_ones(extra.shape[0]), labels.new_zeros(n)])
+        _, disc_stats = discriminator_loss(js_logits, js_labels)
         js = disc_stats["js_estimate"].item()
     lam = _lambda(cfg, state, js, batch.timestep)
     state.reward_rms.update(batch.env_rewards.reshape(-1, 1).float())

@@ -14,7 +14,7 @@ from typing import Any
 from ray.rllib.callbacks.callbacks import RLlibCallback
 
 from rllib_asor.algorithms.common import actor_shutdown
-from rllib_asor.rllib.learners import DISC_PREFIX, PROXY_PREFIX
+from rllib_asor.rllib.learners import ASOR_PREFIX
 
 # Every trainable the CLI or `with_asor` builds unpickles one of the callbacks below, so this
 # runs in its process: its env runners are dead before its `stop()` returns and Tune frees the
@@ -43,13 +43,12 @@ def lift_asor_metrics(result: dict[str, Any]) -> dict[str, Any]:
     """Collect `learners/asor_*.<pid>/*` into a dict keyed by pid (flat for one policy)."""
     per_policy: dict[str, dict[str, Any]] = {}
     for module_id, stats in (result.get("learners") or {}).items():
-        for prefix in (DISC_PREFIX, PROXY_PREFIX):
-            if module_id.startswith(prefix) and isinstance(stats, dict):
-                pid = module_id[len(prefix) :]
-                per_policy.setdefault(pid, {}).update(
-                    {k: x for k, v in stats.items() if k in ASOR_METRICS
-                     if (x := _finite(v)) is not None}
-                )  # fmt: skip
+        if module_id.startswith(ASOR_PREFIX) and isinstance(stats, dict):
+            pid = module_id[len(ASOR_PREFIX) :]
+            per_policy.setdefault(pid, {}).update(
+                {k: x for k, v in stats.items() if k in ASOR_METRICS
+                 if (x := _finite(v)) is not None}
+            )  # fmt: skip
     for stats in per_policy.values():
         if "disc_acc_real" in stats and "disc_acc_fake" in stats:
             stats["disc_acc"] = 0.5 * (stats["disc_acc_real"] + stats["disc_acc_fake"])

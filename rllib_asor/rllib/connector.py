@@ -13,15 +13,17 @@ Where batches bypass the Learner connector (the fast off-policy path's flat batc
 dataset batches, MAPLE's batches), the Learner applies this same piece to its train batch.
 
 Per trained policy it turns the adapter's ranked rows into an `AsorBatch` (flat features of
-the valid steps, V(s) from the adapter, the episode chunks), runs
-`rllib_asor.asor.update.asor_update` (the algorithm's steps, in order), adds its λ·b(s) to
-the rewards (or, for an adapter with a `bonus_column`, writes λ·b of its bonus rows there) —
-b from the discriminator *before* this update's discriminator step — and writes the
-discriminator's and the proxy's own batches, so the Learner trains them in the same update.
+the valid steps, V(s) from the adapter, the episode chunks) and hands it to the policy's
+`AsorTrainer` (`rllib_asor.asor.trainer`, held by its `AsorModule`): one call ranks, computes
+λ·b(s) with the discriminator *before* this batch's training, and trains the discriminator
+and the proxy. The piece adds λ·b(s) to the rewards (or, for an adapter with a
+`bonus_column`, writes λ·b of its bonus rows there). Nothing of ASOR enters the policy's
+minibatch loop.
 
 Several Learners (DDP): every Learner runs the same ASOR update on the rows of all Learners
 (`gather_batches`), so ASOR's state stays identical on all ranks; each keeps the bonus of its
-own rows and an equal share of the aux batches (docs/algorithm.md, "Many Learners").
+own rows, trains on an equal share of the aux batches and averages the gradients
+(docs/algorithm.md, "Many Learners").
 """
 
 from __future__ import annotations
@@ -29,10 +31,8 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 import torch
 import torch.distributed as dist
 import tree
@@ -41,6 +41,7 @@ from ray.rllib.connectors.learner import GeneralAdvantageEstimation
 from ray.rllib.core import DEFAULT_MODULE_ID
 from ray.rllib.core.columns import Columns
 
+from rllib_asor.algorithms.common.asor_adapter import DYNAMICS_ID
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.networks import flatten, select, select_space
 from rllib_asor.asor.proxy import ProxyInputs
@@ -48,23 +49,13 @@ from rllib_asor.asor.update import (
     AsorBatch,
     AsorState,
     Chunk,
-    asor_update,
     bonus_for_rows,
     concat_batches,
 )
 from rllib_asor.devices import module_device
-from rllib_asor.rllib.modules import DYNAMICS_ID, LABEL, proxy_batch
 
 SHARED_VALUES = "asor_critic_values"
 """`shared_data` key: {policy id: V(s) of every batch row}, from ASOR's piece for GAE."""
-
-
-@dataclass(frozen=True)
-class AuxModuleIds:
-    """Module ids of one policy's discriminator and proxy (None when the mode needs none)."""
-
-    disc: str
-    proxy: str | None
 
 
 class SharedValuesGAE(GeneralAdvantageEstimation):
@@ -136,22 +127,25 @@ class AsorRewardConnector(ConnectorV2):
         input_action_space: Any = None,
         *,
         asor: AsorConfig,
-        aux_ids: dict[str, AuxModuleIds],
+        module_ids: dict[str, str],
         adapter: Any,
         gamma: float,
+        minibatch_size: int | None = None,
         timestep_fn: Callable[[], float] | None = None,
         **kwargs: Any,
     ) -> None:
-        """`adapter`: the algorithm's `AsorAdapter`; `timestep_fn`: env steps sampled so far
+        """`module_ids`: policy id → the id of its `AsorModule`; `adapter`: the algorithm's
+        `AsorAdapter`; `minibatch_size`: rows per step of ASOR's networks (the policy's
+        minibatch size; None: the whole batch); `timestep_fn`: env steps sampled so far
         (λ schedules); None (offline): the number of rows this piece has ranked so far, on
         every Learner (not checkpointed: it restarts at 0 on restore)."""
         super().__init__(input_observation_space, input_action_space, **kwargs)
         self.asor = asor
-        self.aux_ids = dict(aux_ids)
+        self.module_ids = dict(module_ids)
         self.adapter = adapter
         self.timestep_fn = timestep_fn
         self.gamma = float(gamma)
-        self._rng = np.random.default_rng(asor.seed)
+        self.minibatch_size = minibatch_size
         self.rows_ranked = 0
 
     def __call__(
@@ -162,15 +156,18 @@ class AsorRewardConnector(ConnectorV2):
         episodes: Any,
         metrics: Any = None,
         shared_data: dict | None = None,
+        aux_rows: float | None = None,
         **kwargs: Any,
     ) -> Any:
+        """`aux_rows`: rows each ASOR network trains on in this call (None: `aux_epochs`
+        passes over its batch)."""
         rank, size = rank_and_size()
         timestep = self.timestep_fn() if self.timestep_fn is not None else float(self.rows_ranked)
-        for policy_id, ids in sorted(self.aux_ids.items()):
+        for policy_id, module_id in sorted(self.module_ids.items()):
             # Several Learners: every one takes part in every policy's (collective) update.
             if policy_id in batch or size > 1:
                 values = self._augment(
-                    rl_module, batch, policy_id, ids, episodes, metrics, timestep
+                    rl_module, batch, policy_id, module_id, episodes, metrics, timestep, aux_rows
                 )
                 if shared_data is not None and values is not None:
                     shared_data.setdefault(SHARED_VALUES, {})[policy_id] = values
@@ -182,15 +179,16 @@ class AsorRewardConnector(ConnectorV2):
         rl_module: Any,
         batch: dict,
         policy_id: str,
-        ids: AuxModuleIds,
+        module_id: str,
         episodes: Any,
         metrics: Any,
         timestep: float,
+        aux_rows: float | None,
     ) -> torch.Tensor | None:
-        """Augments the rewards of `policy_id`; returns the critic's values of every row when
-        the adapter shares them with GAE (what GAE computes next), else None."""
-        state = rl_module[ids.disc].unwrapped().state
-        proxy = rl_module[ids.proxy].unwrapped().proxy if ids.proxy is not None else None
+        """Augments the rewards of `policy_id` and trains its ASOR networks; returns the
+        critic's values of every row when the adapter shares them with GAE (what GAE computes
+        next), else None."""
+        trainer = rl_module[module_id].unwrapped().trainer
         built = (
             self._asor_batch(rl_module, batch, policy_id, episodes, timestep)
             if policy_id in batch
@@ -198,30 +196,21 @@ class AsorRewardConnector(ConnectorV2):
         )
         rank, size = rank_and_size()
         if size == 1:
-            asor_batch, proxy_in = built[0], built[0].proxy_inputs
-            result = asor_update(self.asor, state, proxy, asor_batch, self._rng)
-            self.rows_ranked += asor_batch.features.shape[0]
-            own_delta, disc_feats, disc_labels = (
-                result.reward_delta,
-                result.disc_features,
-                result.disc_labels,
-            )
+            result = trainer.step(built[0], self.minibatch_size, aux_rows)
+            self.rows_ranked += built[0].features.shape[0]
+            own_delta = result.reward_delta
         else:  # the same update on every Learner, on all their rows (see `gather_batches`)
-            device = module_device(state)
-            shards = gather_batches(None if built is None else built[0], device)
+            shards = gather_batches(None if built is None else built[0], module_device(trainer))
             present = [b for b in shards if b is not None]
             if not present:
                 return None
             whole = concat_batches(present)
-            result = asor_update(self.asor, state, proxy, whole, self._rng)
+            result = trainer.step(whole, self.minibatch_size, aux_rows, share=(rank, size))
             self.rows_ranked += whole.features.shape[0]
             offset = sum(b.features.shape[0] for b in shards[:rank] if b is not None)
             own_delta = None
             if built is not None:
                 own_delta = result.reward_delta[offset : offset + built[0].features.shape[0]]
-            disc_feats = even_share(result.disc_features, rank, size)
-            disc_labels = even_share(result.disc_labels, rank, size)
-            proxy_in = even_share_inputs(whole.proxy_inputs, rank, size)
 
         if built is not None:
             pb, column = batch[policy_id], self.adapter.bonus_column
@@ -229,13 +218,10 @@ class AsorRewardConnector(ConnectorV2):
                 self._add_to_rewards(pb, built[1], own_delta)
             else:
                 pb[column] = bonus_on_rows(
-                    self.asor, state, result.lam, self.adapter.bonus_rows(pb), self.gamma
+                    self.asor, trainer.state, result.lam, self.adapter.bonus_rows(pb), self.gamma
                 )
-        batch[ids.disc] = {Columns.OBS: disc_feats, LABEL: disc_labels}
-        if ids.proxy is not None:
-            batch[ids.proxy] = proxy_batch(proxy_in)
         if metrics is not None and result.metrics:
-            metrics.log_dict(result.metrics, key=ids.disc, window=1)
+            metrics.log_dict(result.metrics, key=module_id, window=1)
         if built is None or not self.adapter.shares_values_with_gae:
             return None
         return built[2]
@@ -395,18 +381,3 @@ def gather_batches(batch: AsorBatch | None, device: torch.device | str) -> list[
     out: list[Any] = [None] * dist.get_world_size()
     dist.all_gather_object(out, None if batch is None else _moved(batch, "cpu"))
     return [None if b is None else _moved(b, device) for b in out]
-
-
-def even_share(rows: torch.Tensor | None, rank: int, size: int) -> torch.Tensor | None:
-    """This rank's block of `rows`: ⌊N / size⌋ rows each (the remainder is left out)."""
-    if rows is None:
-        return None
-    k = rows.shape[0] // size
-    return rows[rank * k : (rank + 1) * k]
-
-
-def even_share_inputs(x: ProxyInputs, rank: int, size: int) -> ProxyInputs:
-    """`even_share` of every field of a proxy's inputs."""
-    return ProxyInputs(
-        *(even_share(getattr(x, f.name), rank, size) for f in dataclasses.fields(ProxyInputs))
-    )

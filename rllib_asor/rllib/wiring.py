@@ -2,8 +2,9 @@
 
 What it wires in:
 - the algorithm's ASOR Learner class (PPO: `AsorPPOTorchLearner`),
-- per trained policy a `learner_only` discriminator and (modes `asor`/`count`) a proxy module
-  in the MultiRLModule (`asor_disc.<policy>`, `asor_proxy.<policy>`),
+- per trained policy one `learner_only` module in the MultiRLModule (`asor_disc.<policy>`, an
+  `AsorModule`: the policy's `AsorTrainer` with the discriminator, the proxy and their
+  optimisers; ASOR's piece trains it, RLlib only builds, places and checkpoints it),
 - the validated settings in `learner_config_dict["asor"]` (pickled into every Learner and
   checkpoint),
 - a callback that lifts the Learner's ASOR statistics to `asor/...` in the results.
@@ -43,11 +44,10 @@ from rllib_asor.rllib.learners import (
     AsorMapleTorchLearner,
     AsorPPOTorchLearner,
     AsorSACTorchLearner,
-    disc_module_id,
+    asor_module_id,
     is_aux_module,
-    proxy_module_id,
 )
-from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
+from rllib_asor.rllib.modules import AsorModule
 
 SUPPORTED = {
     "PPO": AsorPPOTorchLearner,
@@ -66,8 +66,8 @@ SPECIFIC = tuple(c for c in ASOR_LEARNERS if c not in SUPPORTED.values())
 class AsorMultiRLModuleSpec(MultiRLModuleSpec):
     """A MultiRLModuleSpec whose ASOR modules inherit their policy's spaces at build time.
 
-    RLlib fills missing spaces only for policies; an auxiliary module `asor_disc.<pid>` takes
-    the observation/action space of `<pid>`.
+    RLlib fills missing spaces only for policies; ASOR's module `asor_disc.<pid>` takes the
+    observation/action space of `<pid>`.
     """
 
     def build(self, module_id: str | None = None) -> Any:
@@ -261,19 +261,9 @@ def _module_spec(config: AlgorithmConfig, asor: AsorConfig) -> AsorMultiRLModule
             "observation_space": getattr(policy_spec, "observation_space", None),
             "action_space": getattr(policy_spec, "action_space", None),
         }
-        specs[disc_module_id(pid)] = RLModuleSpec(
-            module_class=AsorDiscriminatorModule,
-            learner_only=True,
-            model_config=dict(model_config),
-            **spaces,
+        specs[asor_module_id(pid)] = RLModuleSpec(
+            module_class=AsorModule, learner_only=True, model_config=dict(model_config), **spaces
         )
-        if asor.needs_proxy:
-            specs[proxy_module_id(pid)] = RLModuleSpec(
-                module_class=AsorProxyModule,
-                learner_only=True,
-                model_config=dict(model_config),
-                **spaces,
-            )
     return AsorMultiRLModuleSpec(**{**keep, "rl_module_specs": specs})
 
 
@@ -295,7 +285,7 @@ def arm_differences(base: AlgorithmConfig, treated: AlgorithmConfig) -> list[str
     beyond what `with_asor` adds; [] when the two arms differ only in ASOR.
 
     What `with_asor` may add: `learner_config_dict["asor"]`, the Learner
-    `asor_learner_class(base)`, the discriminator/proxy module specs beside the unchanged
+    `asor_learner_class(base)`, ASOR's module specs beside the unchanged
     policy specs, `AsorMetricsCallback`, and `policies_to_train` that also trains its modules.
     """
     a, b = base.to_dict(), treated.to_dict()
