@@ -1,7 +1,7 @@
 """`AsorTrainer`: ASOR's networks and their training for one policy, in one call per train batch.
 
-Plain torch, no Ray. `step(batch)` runs the paper's steps 1-7 (`asor_update`: rank, Δr from
-ω before this update, λ), then trains the discriminator on D_P (1) vs D_Q (0) and the
+Plain torch, no Ray. `step(batch)` runs the paper's steps 1-7 (`rank`, i.e. `asor_update`:
+D_P, Δr from ω before this update, λ), then trains (`train`) the discriminator on D_P (1) vs D_Q (0) and the
 visitation proxy on the batch's states, each with its own Adam optimiser, for `aux_epochs`
 passes over its batch (one when unset) in minibatches of the caller's size, and returns Δr and
 the metrics of both. The caller adds Δr to its rewards; nothing of it enters the policy's
@@ -76,14 +76,33 @@ class AsorTrainer(nn.Module):
         rows: float | None = None,
         share: tuple[int, int] = (0, 1),
     ) -> AsorResult:
-        """Rank `batch`, compute Δr with ω from before this call, then train the networks.
+        """`rank(batch)` then `train(...)` on what it returned: Δr with ω from before this
+        call, then the networks' steps. See `train` for the arguments."""
+        result = self.rank(batch)
+        self.train(result, batch, minibatch_size, rows, share)
+        return result
+
+    def rank(self, batch: AsorBatch) -> AsorResult:
+        """Steps 1-7 on `batch` (`asor_update`): D_P, Δr and λ, the networks not yet trained
+        (a caller that needs ω of other rows before training, e.g. MAPLE's model rows, reads
+        it between `rank` and `train`)."""
+        return asor_update(self.cfg, self.state, self.proxy, batch, self.rng)
+
+    def train(
+        self,
+        result: AsorResult,
+        batch: AsorBatch,
+        minibatch_size: int | None = None,
+        rows: float | None = None,
+        share: tuple[int, int] = (0, 1),
+    ) -> None:
+        """Train the discriminator on `result`'s D_P vs D_Q and the proxy on `batch`'s states;
+        their metrics join `result.metrics` (means over the minibatches).
 
         `minibatch_size`: rows per optimiser step (None: the whole aux batch at once).
         `rows`: rows to train on per network (None: `aux_epochs` passes over its batch, one
-        when unset). `share`: (rank, world size) when several Learners call `step` with the
-        same whole batch (module docstring). Returns `asor_update`'s result, its metrics
-        joined by the training's (means over the minibatches)."""
-        result = asor_update(self.cfg, self.state, self.proxy, batch, self.rng)
+        when unset). `share`: (rank, world size) when several Learners call this with the
+        same whole batch (module docstring)."""
         rank, size = share
         proxy_in = batch.proxy_inputs or ProxyInputs(batch.features)
         disc_feats, labels = result.disc_features, result.disc_labels
@@ -98,7 +117,6 @@ class AsorTrainer(nn.Module):
             metrics.update(self.train_proxy(proxy_in, minibatch_size, rows, size > 1))
         if result.metrics:
             result.metrics.update(metrics)
-        return result
 
     def train_discriminator(
         self,

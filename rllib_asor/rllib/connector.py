@@ -196,8 +196,8 @@ class AsorRewardConnector(ConnectorV2):
         )
         rank, size = rank_and_size()
         if size == 1:
-            result = trainer.step(built[0], self.minibatch_size, aux_rows)
-            self.rows_ranked += built[0].features.shape[0]
+            whole = built[0]
+            result = trainer.rank(whole)
             own_delta = result.reward_delta
         else:  # the same update on every Learner, on all their rows (see `gather_batches`)
             shards = gather_batches(None if built is None else built[0], module_device(trainer))
@@ -205,21 +205,22 @@ class AsorRewardConnector(ConnectorV2):
             if not present:
                 return None
             whole = concat_batches(present)
-            result = trainer.step(whole, self.minibatch_size, aux_rows, share=(rank, size))
-            self.rows_ranked += whole.features.shape[0]
+            result = trainer.rank(whole)
             offset = sum(b.features.shape[0] for b in shards[:rank] if b is not None)
             own_delta = None
             if built is not None:
                 own_delta = result.reward_delta[offset : offset + built[0].features.shape[0]]
+        self.rows_ranked += whole.features.shape[0]
 
         if built is not None:
             pb, column = batch[policy_id], self.adapter.bonus_column
             if column is None:
                 self._add_to_rewards(pb, built[1], own_delta)
-            else:
+            else:  # ω of the bonus rows before this batch's training, as the ranked rows'
                 pb[column] = bonus_on_rows(
                     self.asor, trainer.state, result.lam, self.adapter.bonus_rows(pb), self.gamma
                 )
+        trainer.train(result, whole, self.minibatch_size, aux_rows, share=(rank, size))
         if metrics is not None and result.metrics:
             metrics.log_dict(result.metrics, key=module_id, window=1)
         if built is None or not self.adapter.shares_values_with_gae:

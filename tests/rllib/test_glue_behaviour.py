@@ -388,13 +388,13 @@ def test_the_policys_minibatches_are_shuffled_when_asked(monkeypatch):
 
 
 def test_the_connector_logs_the_last_updates_metrics_and_runs_without_a_logger(monkeypatch):
-    seen, real = [], AsorTrainer.step
+    seen, real = [], AsorTrainer.rank
 
     def spy(*args, **kwargs):
         seen.append(real(*args, **kwargs))
         return seen[-1]
 
-    monkeypatch.setattr(AsorTrainer, "step", spy)
+    monkeypatch.setattr(AsorTrainer, "rank", spy)
     lrn, logger = learner(lambda_warmup=False), MetricsLogger()
     for seed in range(3):
         lrn._learner_connector(

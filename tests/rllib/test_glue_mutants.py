@@ -5,7 +5,7 @@ The metrics callbacks keep only finite numbers and drop NaN at every depth under
 a Tune run name maps to the supported algorithm it derives from; the reward rows keep their
 dtype and device, and so does the bonus of an adapter's bonus rows; an episode id keeps its
 own "_" (only RLlib's "_<i>" suffix is stripped); the many-Learner path moves every tensor
-of an `AsorBatch` to the Learner's device; the proxy module is seeded for every proxy kind.
+of an `AsorBatch` to the Learner's device; the proxy is seeded for every proxy kind.
 
 CI has no GPU: a factory call that ignores the data's device is caught by running the code
 with torch's default device set to "meta" (as tests/asor/test_device_behaviour.py does), a
@@ -14,7 +14,6 @@ dtype that ignores the data's by data in another dtype than torch's default.
 
 from __future__ import annotations
 
-import itertools
 import math
 import os
 
@@ -28,8 +27,6 @@ from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
 from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.algorithms.sac.torch.sac_torch_learner import SACTorchLearner
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
-from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
-from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
 from rllib_asor import with_asor
 from rllib_asor.algorithms.sac.fast import FLAT_STORAGE, fast_off_policy
@@ -46,17 +43,17 @@ from rllib_asor.rllib.callbacks import (
 )
 from rllib_asor.rllib.connector import AsorRewardConnector
 from rllib_asor.rllib.learners import AsorPPOTorchLearner, AsorSACTorchLearner
-from rllib_asor.rllib.modules import AsorProxyModule
+from rllib_asor.rllib.modules import AsorModule
 from rllib_asor.rllib.wiring import asor_learner_class, supported_run
 from tests.rllib.test_glue_behaviour import episodes, learner
 
 NAN, INF = float("nan"), float("inf")
-DISC, PROXY = "asor_disc." + DEFAULT_MODULE_ID, "asor_proxy." + DEFAULT_MODULE_ID
+DISC = "asor_disc." + DEFAULT_MODULE_ID
 
 
 def piece(**asor) -> AsorRewardConnector:
     """The ASOR piece on its own (no Learner): enough for its row helpers."""
-    return AsorRewardConnector(asor=AsorConfig(**asor), aux_ids={}, adapter=None, gamma=0.9)
+    return AsorRewardConnector(asor=AsorConfig(**asor), module_ids={}, adapter=None, gamma=0.9)
 
 
 # ------------------------------------------------------------------ metrics callbacks
@@ -135,20 +132,25 @@ def test_per_dynamics_rnd_is_refused_on_the_flat_storage_whatever_the_learner():
 
 def test_the_aux_optimizers_take_the_settings_learning_rates_and_weight_decay():
     lrn = learner(disc_lr=2e-3, rnd_lr=5e-3, disc_weight_decay=0.01)
-    disc, proxy = lrn.get_optimizer(DISC), lrn.get_optimizer(PROXY)
-    assert lrn._get_optimizer_lr(disc) == pytest.approx(2e-3)
-    assert lrn._get_optimizer_lr(proxy) == pytest.approx(5e-3)
+    trainer = lrn.module[DISC].unwrapped().trainer
+    disc, proxy = trainer.disc_optimizer, trainer.proxy_optimizer
+    assert disc.param_groups[0]["lr"] == pytest.approx(2e-3)
+    assert proxy.param_groups[0]["lr"] == pytest.approx(5e-3)
     assert disc.param_groups[0]["weight_decay"] == 0.01
     assert proxy.param_groups[0]["weight_decay"] == 0.0
-    # the proxy's optimizer holds exactly its trainable parameters (not the frozen RND target)
-    trainable = {id(p) for p in lrn.module[PROXY].parameters() if p.requires_grad}
+    # each optimizer holds exactly its network's trainable parameters (not the RND target)
+    trainable = {id(p) for p in trainer.proxy.parameters() if p.requires_grad}
     assert {id(p) for g in proxy.param_groups for p in g["params"]} == trainable
-    assert len(trainable) < len(list(lrn.module[PROXY].parameters()))
+    assert len(trainable) < len(list(trainer.proxy.parameters()))
+    assert {id(p) for g in disc.param_groups for p in g["params"]} == {
+        id(p) for p in trainer.state.parameters()
+    }
 
 
-def test_a_fresh_learner_counts_no_aux_rows_until_it_has_seen_a_batch():
-    lrn = learner(aux_epochs=3)
-    assert lrn.aux_rows(DISC) == 0 and lrn.aux_rows(PROXY) == 0
+def test_asors_module_has_no_rllib_optimizer_and_its_minibatch_is_the_policys():
+    lrn = learner()
+    assert lrn.get_optimizers_for_module(DISC) == []
+    assert lrn._asor_piece.minibatch_size == lrn.config.minibatch_size == 30
 
 
 def test_maples_bonus_rows_get_the_configs_gamma(monkeypatch):
@@ -268,40 +270,14 @@ def test_gathered_batches_land_on_the_learners_device(tmp_path):
     assert len(_tensors(got)) == 10 and all(t.device.type == "meta" for t in _tensors(got))
 
 
-# ------------------------------------------------------------------ the aux modules' passes
-def test_an_aux_module_that_left_is_not_waited_for_without_a_fixed_minibatch_count():
-    """RLlib's iterator without a fixed minibatch count runs until every module it tracks has
-    covered its epochs; an aux module that trained its `aux_rows` leaves and is no longer
-    tracked, so the iteration ends with the policy's epoch."""
-    lrn = object.__new__(AsorPPOTorchLearner)  # its iterator methods need only these three
-    lrn.asor, lrn._asor_aux_sizes, lrn._asor_rows_trained = (
-        AsorConfig(aux_epochs=0.5),
-        {DISC: 90},
-        {},
-    )
-    rows = {DEFAULT_MODULE_ID: 30, DISC: 90}
-    batch = MultiAgentBatch(
-        {m: SampleBatch({Columns.OBS: torch.zeros(n, 3)}) for m, n in rows.items()}, 30
-    )
-    it = MiniBatchCyclicIterator(
-        batch, num_epochs=1, minibatch_size=30, shuffle_batch_per_epoch=False
-    )
-    trained = []
-    for minibatch in itertools.islice(lrn._without_finished_aux(it), 10):
-        kept = lrn._cap_aux_passes(dict(minibatch.policy_batches))  # what `_update` does
-        trained.append(sorted(kept))
-    assert trained == [sorted(rows)] * 2  # 60 of the disc's 90 rows ≥ aux_rows = 45
-    assert lrn._asor_rows_trained == {DISC: 60}
-
-
-# ------------------------------------------------------------------ the proxy module's seed
+# ------------------------------------------------------------------ the proxy's seed
 @pytest.mark.parametrize("proxy", ["rnd", "rnd_per_dynamics", "ensemble"])
 def test_every_proxy_kind_is_seeded_and_leaves_the_global_rng_alone(proxy):
     obs, act = gym.spaces.Box(-1, 1, (4,), np.float32), gym.spaces.Discrete(3)
     cfg = {"asor": AsorConfig(seed=7, proxy=proxy, rnd_hiddens=[8]).to_dict()}
 
     def build():
-        return AsorProxyModule(observation_space=obs, action_space=act, model_config=cfg)
+        return AsorModule(observation_space=obs, action_space=act, model_config=cfg).trainer.proxy
 
     torch.manual_seed(5)
     expected_next = torch.rand(1)

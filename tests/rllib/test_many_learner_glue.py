@@ -1,7 +1,8 @@
 """The ASOR piece on two Learners (a real two-process gloo group, no Ray): the rewards each rank
-gets and the aux batches it trains on are exactly those one Learner computes on both ranks'
-episodes together — its own rows' bonus, an equal share of the discriminator's and the proxy's
-batches (rllib_asor/rllib/connector.py, "Several Learners"); for MAPLE+ASOR the same with the
+gets and the rows its ASOR networks train on are exactly those one Learner computes on both
+ranks' episodes together — its own rows' bonus, an equal share of the discriminator's and the
+proxy's batches (rllib_asor/rllib/connector.py, "Several Learners") — and after every call both
+ranks hold the same ASOR state (the gradients are averaged); for MAPLE+ASOR the same with the
 real states of both ranks ranked together (`AsorMapleTorchLearner`, rllib_asor/rllib/learners.py)."""
 
 from __future__ import annotations
@@ -15,11 +16,9 @@ import torch
 import torch.distributed as dist
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 
-from rllib_asor.rllib.connector import even_share
-from rllib_asor.rllib.learners import disc_module_id
+from rllib_asor.asor.trainer import AsorTrainer, even_share
+from rllib_asor.rllib.learners import asor_module_id
 from tests.rllib.test_glue_behaviour import (
-    DISC,
-    PROXY,
     episodes,
     learner,
     ma_episodes,
@@ -65,17 +64,51 @@ def join_group(rank: int, store: str) -> None:
     )
 
 
-def _pieces(batch: dict) -> dict[str, torch.Tensor]:
-    out = {f"disc_{k}": v.clone() for k, v in batch[DISC].items()}
-    out |= {f"proxy_{k}": v.clone() for k, v in batch.get(PROXY, {}).items()}
-    return out | {"rewards": batch[DEFAULT_MODULE_ID][Columns.REWARDS].clone()}
+class trained_rows:
+    """Within the block, `rows` holds what each ASOR network of every policy was handed to
+    train on (the discriminator's features and labels, the proxy's inputs), in call order."""
+
+    def __enter__(self) -> list[dict[str, torch.Tensor]]:
+        self.rows: list[dict[str, torch.Tensor]] = []
+        self.real = AsorTrainer.train_discriminator, AsorTrainer.train_proxy
+        real_disc, real_proxy = self.real
+
+        def disc(trainer, x, y, *args, **kwargs):
+            self.rows.append({"disc_obs": x.clone(), "disc_label": y.clone()})
+            return real_disc(trainer, x, y, *args, **kwargs)
+
+        def proxy(trainer, x, *args, **kwargs):
+            self.rows[-1] |= {"proxy_obs": x.features.clone()}
+            if x.next_features is not None:
+                self.rows[-1] |= {"proxy_next_obs": x.next_features.clone()}
+            return real_proxy(trainer, x, *args, **kwargs)
+
+        AsorTrainer.train_discriminator, AsorTrainer.train_proxy = disc, proxy
+        return self.rows
+
+    def __exit__(self, *exc) -> None:
+        AsorTrainer.train_discriminator, AsorTrainer.train_proxy = self.real
+
+
+def asor_state(lrn, policy: str = DEFAULT_MODULE_ID) -> dict[str, torch.Tensor]:
+    """The policy's ASOR networks and statistics, by name."""
+    trainer = lrn.module[asor_module_id(policy)].unwrapped().trainer
+    return {k: v.detach().clone() for k, v in trainer.state_dict().items()}
+
+
+def _pieces(lrn, eps) -> dict[str, torch.Tensor]:
+    with trained_rows() as rows:
+        batch = module_batch(lrn, eps)
+    (trained,) = rows
+    return trained | {"rewards": batch[DEFAULT_MODULE_ID][Columns.REWARDS].clone()}
 
 
 def _ppo_pieces(rank: int, settings: dict) -> dict:
     lrn = learner(**settings)
     pieces = {}
     for call, seeds in CALLS.items():  # ASOR's state carries over from call to call
-        pieces[call] = _pieces(module_batch(lrn, episodes(seeds[rank])))
+        pieces[call] = _pieces(lrn, episodes(seeds[rank]))
+        pieces[call + "_state"] = asor_state(lrn)
     return pieces
 
 
@@ -105,39 +138,52 @@ def test_two_learners_get_what_one_learner_computes_on_both_batches(name, two_ra
     ranks = [r[name] for r in two_ranks]
 
     one = learner(**settings)
-    for call, seeds in CALLS.items():
-        whole = _pieces(module_batch(one, episodes(seeds[0]) + episodes(seeds[1])))
-        parts = [r[call] for r in ranks]
-        # each rank's rows get the bonus one Learner gives them (rank 0's rows come first)
-        n0 = parts[0]["rewards"].shape[0]
-        torch.testing.assert_close(parts[0]["rewards"], whole["rewards"][:n0])
-        torch.testing.assert_close(parts[1]["rewards"], whole["rewards"][n0:])
-        # the aux batches, every column: an equal share each of the one-Learner batch
-        aux = sorted(k for k in whole if k != "rewards")
-        if settings.get("proxy") == "ensemble":  # its batches carry s′ besides s
-            assert f"proxy_{Columns.NEXT_OBS}" in aux
-        for r in range(2):
-            assert sorted(k for k in parts[r] if k != "rewards") == aux
-            for key in aux:
-                torch.testing.assert_close(parts[r][key], even_share(whole[key], r, 2))
-        # ... and the bonus is there: the env pays only -0.02, 0 and 1
-        plain = torch.tensor([-0.02, 0.0, 1.0])
-        assert (whole["rewards"].reshape(-1, 1) - plain).abs().min(-1).values.max() > 1e-4
-
-
-def _ma_pieces(batch: dict, policy: str) -> dict[str, torch.Tensor]:
-    out = {k: v.clone() for k, v in batch[disc_module_id(policy)].items()}
-    if policy in batch:  # absent on a Learner whose agents of that policy did not act
-        out["rewards"] = batch[policy][Columns.REWARDS].clone()
-    return out
+    call, seeds = "first", CALLS["first"]  # one Learner's networks then train differently
+    whole = _pieces(one, episodes(seeds[0]) + episodes(seeds[1]))
+    parts = [r[call] for r in ranks]
+    # each rank's rows get the bonus one Learner gives them (rank 0's rows come first)
+    n0 = parts[0]["rewards"].shape[0]
+    torch.testing.assert_close(parts[0]["rewards"], whole["rewards"][:n0])
+    torch.testing.assert_close(parts[1]["rewards"], whole["rewards"][n0:])
+    # what the networks train on, every column: an equal share each of the one-Learner rows
+    aux = sorted(k for k in whole if k != "rewards")
+    if settings.get("proxy") == "ensemble":  # its inputs carry s′ besides s
+        assert "proxy_next_obs" in aux
+    for r in range(2):
+        assert sorted(k for k in parts[r] if k != "rewards") == aux
+        for key in aux:
+            torch.testing.assert_close(parts[r][key], even_share(whole[key], r, 2))
+    # ... and the bonus is there: the env pays only -0.02, 0 and 1
+    plain = torch.tensor([-0.02, 0.0, 1.0])
+    assert (whole["rewards"].reshape(-1, 1) - plain).abs().min(-1).values.max() > 1e-4
+    # after every call both ranks hold the same ASOR state, and it trained
+    fresh = asor_state(learner(**settings))
+    for call in CALLS:
+        a, b = ranks[0][call + "_state"], ranks[1][call + "_state"]
+        assert a.keys() == b.keys() == fresh.keys()
+        for key in a:
+            torch.testing.assert_close(a[key], b[key], msg=f"{call}: {key}")
+    assert any(not torch.equal(a[k], fresh[k]) for k in fresh)
 
 
 MA_AGENTS = (("a0", "a1"), ("a0",))  # rank 1 has no rows of policy "p1"
 
 
+def _ma_pieces(lrn, eps) -> dict[str, dict[str, torch.Tensor]]:
+    """Per policy: the rows its ASOR networks trained on, its rewards (absent on a Learner
+    whose agents of that policy did not act) and its ASOR state after the call."""
+    with trained_rows() as rows:
+        batch = module_batch(lrn, eps)
+    out = {}
+    for policy, trained in zip(("p0", "p1"), rows, strict=True):  # the piece goes in id order
+        out[policy] = trained | {"state": asor_state(lrn, policy)}
+        if policy in batch:
+            out[policy]["rewards"] = batch[policy][Columns.REWARDS].clone()
+    return out
+
+
 def _ma_pieces_of_rank(rank: int) -> dict:
-    batch = module_batch(ma_learner(), ma_episodes(rank, MA_AGENTS[rank]))
-    return {p: _ma_pieces(batch, p) for p in ("p0", "p1")}
+    return _ma_pieces(ma_learner(), ma_episodes(rank, MA_AGENTS[rank]))
 
 
 def test_a_learner_without_rows_of_a_policy_still_takes_part_in_its_update(two_ranks):
@@ -145,18 +191,20 @@ def test_a_learner_without_rows_of_a_policy_still_takes_part_in_its_update(two_r
     gets ASOR's update on every rank (it is collective), with rank 0's rows ranked as one
     Learner ranks them and an equal share of the discriminator's batch on each rank."""
     ranks = [r["multi_agent"] for r in two_ranks]
-    whole = module_batch(ma_learner(), ma_episodes(0, MA_AGENTS[0]) + ma_episodes(1, MA_AGENTS[1]))
+    whole = _ma_pieces(ma_learner(), ma_episodes(0, MA_AGENTS[0]) + ma_episodes(1, MA_AGENTS[1]))
     for policy in ("p0", "p1"):
-        one = _ma_pieces(whole, policy)
+        one = whole[policy]
         n0 = ranks[0][policy]["rewards"].shape[0]
         torch.testing.assert_close(ranks[0][policy]["rewards"], one["rewards"][:n0])
         if policy == "p1":
             assert "rewards" not in ranks[1][policy] and n0 == one["rewards"].shape[0]
         else:
             torch.testing.assert_close(ranks[1][policy]["rewards"], one["rewards"][n0:])
-        for key in (k for k in one if k != "rewards"):
+        for key in (k for k in one if k not in ("rewards", "state")):
             for r in range(2):
                 torch.testing.assert_close(ranks[r][policy][key], even_share(one[key], r, 2))
+        for key, value in ranks[0][policy]["state"].items():
+            torch.testing.assert_close(ranks[1][policy]["state"][key], value)
 
 
 def _maple_pieces(learner, batch) -> dict[str, torch.Tensor]:
@@ -165,25 +213,19 @@ def _maple_pieces(learner, batch) -> dict[str, torch.Tensor]:
 
     got: dict[str, torch.Tensor] = {}
     real_losses = maple_learner_module.maple_losses
-    real_update = maple_learner_module.MapleTorchLearner._update
 
     def losses(nets, b, **kw):
         got["bonus"] = kw["bonus"].clone()
         return real_losses(nets, b, **kw)
 
-    def update(self, batch, **kw):
-        got["disc_obs"] = batch[DISC][Columns.OBS].clone()
-        got["proxy_obs"] = batch[PROXY][Columns.OBS].clone()
-        return real_update(self, batch, **kw)
-
     maple_learner_module.maple_losses = losses
-    maple_learner_module.MapleTorchLearner._update = update
     try:
-        learner.update(batch=batch, timesteps={"maple_gradient_steps": 0})
+        with trained_rows() as rows:
+            learner.update(batch=batch, timesteps={"maple_gradient_steps": 0})
     finally:
         maple_learner_module.maple_losses = real_losses
-        maple_learner_module.MapleTorchLearner._update = real_update
-    return got
+    (trained,) = rows
+    return got | {"disc_obs": trained["disc_obs"], "proxy_obs": trained["proxy_obs"]}
 
 
 def _maple_pieces_of_rank(rank: int) -> dict:
@@ -192,7 +234,9 @@ def _maple_pieces_of_rank(rank: int) -> dict:
     lrn = maple_learner(preset="paper", lambda_=0.1)
     pieces = _maple_pieces(lrn, maple_batch(lrn, seed=rank)[1])
     lrn.update(batch=maple_batch(lrn, seed=rank + 2)[1], timesteps={"maple_gradient_steps": 1})
-    return pieces | {"rows_ranked": torch.tensor(lrn._asor_piece.rows_ranked)}
+    return pieces | {
+        "rows_ranked": torch.tensor(lrn._asor_piece.rows_ranked), "state": asor_state(lrn)
+    }
 
 
 def test_two_maple_learners_rank_all_real_states_and_keep_their_own_bonus(two_ranks):
@@ -216,3 +260,5 @@ def test_two_maple_learners_rank_all_real_states_and_keep_their_own_bonus(two_ra
     # offline λ's timestep: each Learner counts the real rows of all Learners, call after call
     assert one._asor_piece.rows_ranked == 48
     assert [int(r["rows_ranked"]) for r in ranks] == [2 * 48, 2 * 48]
+    for key, value in ranks[0]["state"].items():  # two calls later: the same ASOR state
+        torch.testing.assert_close(ranks[1]["state"][key], value)

@@ -22,17 +22,24 @@ import rllib_asor
 from rllib_asor.algorithms.sac.asor_adapter import soft_q_state_values
 from rllib_asor.algorithms.sac.fast import fast_off_policy
 from rllib_asor.algorithms.sac.replay import MINIBATCH_KEY, FlatTransitions
+from rllib_asor.asor import trainer as trainer_module
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.proxy import ProxyInputs, make_proxy
 from rllib_asor.asor.reward import potential_shaping, reward_bonus, standardize
+from rllib_asor.asor.trainer import AsorTrainer
 from rllib_asor.asor.update import AsorBatch, AsorResult, AsorState, asor_update
 from rllib_asor.rllib import connector
-from rllib_asor.rllib.learners import disc_module_id, proxy_module_id
+from rllib_asor.rllib.learners import asor_module_id
 from tests.rllib.test_glue_behaviour import policy_batches_seen
 
 OBS = gym.spaces.Box(-10, 10, (3,), np.float32)
 BOX = gym.spaces.Box(-1, 1, (2,), np.float32)
-DISC, PROXY = disc_module_id(DEFAULT_MODULE_ID), proxy_module_id(DEFAULT_MODULE_ID)
+DISC = asor_module_id(DEFAULT_MODULE_ID)
+
+
+def asor_trainer(learner) -> AsorTrainer:
+    """The default policy's `AsorTrainer`."""
+    return learner.module[DISC].unwrapped().trainer
 SMALL = {"disc_hiddens": [16], "rnd_hiddens": [16], "rnd_embedding_dim": 8, "seed": 0}
 
 
@@ -132,11 +139,11 @@ def changed(before: dict, module) -> bool:
 def test_sac_td_targets_see_the_bonus_of_the_discriminator_before_its_step(monkeypatch):
     learner = sac_learner(preset="paper", lambda_=0.5)
     cols = transitions()
-    disc_before = copy.deepcopy(learner.module[DISC].unwrapped().state.disc)
+    disc_before = copy.deepcopy(asor_trainer(learner).state.disc)
     seen = policy_batches_seen(monkeypatch, learner)
     policy = params(learner.module[DEFAULT_MODULE_ID])
-    disc = params(learner.module[DISC])
-    proxy = params(learner.module[PROXY])
+    disc = params(asor_trainer(learner).state)
+    proxy = params(asor_trainer(learner).proxy)
     results = update(learner, cols)
     assert len(seen) == 2  # 64 rows in minibatches of the train batch size (32)
     env_reward = {
@@ -151,7 +158,8 @@ def test_sac_td_targets_see_the_bonus_of_the_discriminator_before_its_step(monke
         assert (bonus < 0).all()
     assert changed(policy, learner.module[DEFAULT_MODULE_ID])
     assert results[DISC]["lambda"].peek() == pytest.approx(0.5)  # ASOR's statistics reported
-    assert changed(disc, learner.module[DISC]) and changed(proxy, learner.module[PROXY])
+    assert changed(disc, asor_trainer(learner).state)
+    assert changed(proxy, asor_trainer(learner).proxy)
 
 
 def escp_learner(gamma: float, **asor):
@@ -193,17 +201,15 @@ def test_potential_shaping_uses_the_configs_gamma_and_the_critics_values(algo, m
     else:
         learner, cols = escp_learner(0.5, **settings), escp_transitions()
     module = learner.module[DEFAULT_MODULE_ID].unwrapped()
-    disc_before = copy.deepcopy(learner.module[DISC].unwrapped().state.disc)
+    disc_before = copy.deepcopy(asor_trainer(learner).state.disc)
     seen, ranked = policy_batches_seen(monkeypatch, learner), []
-    from rllib_asor.rllib import connector as connector_module
-
-    real_update = connector_module.asor_update
+    real_update = trainer_module.asor_update
 
     def update_spy(cfg, state, proxy, batch, rng):
         ranked.append(batch.values.clone())
         return real_update(cfg, state, proxy, batch, rng)
 
-    monkeypatch.setattr(connector_module, "asor_update", update_spy)
+    monkeypatch.setattr(trainer_module, "asor_update", update_spy)
     tensors = {k: torch.from_numpy(v) for k, v in cols.items()}
     with torch.no_grad():
         expected_values = (
@@ -222,29 +228,31 @@ def test_potential_shaping_uses_the_configs_gamma_and_the_critics_values(algo, m
     torch.testing.assert_close(ranked[0], expected_values)
 
 
+def rows_trained(monkeypatch) -> dict[str, int]:
+    """Rows ASOR's networks train on from now on (both networks, summed over the steps)."""
+    rows = {"rows": 0}
+    real = AsorTrainer._minibatches
+
+    def counted(self, n, size, budget):
+        for idx in real(self, n, size, budget):
+            rows["rows"] += len(idx)
+            yield idx
+
+    monkeypatch.setattr(AsorTrainer, "_minibatches", counted)
+    return rows
+
+
 def test_aux_modules_take_one_minibatch_per_call_unless_aux_epochs_is_set(monkeypatch):
+    rows = rows_trained(monkeypatch)
     learner = sac_learner()
-    rows = {}
-    real = type(learner)._update
-
-    def spy(self, batch, **kwargs):
-        for mid in (DISC, PROXY):
-            if mid in batch:
-                rows[mid] = rows.get(mid, 0) + len(batch[mid][Columns.OBS])
-        return real(self, batch, **kwargs)
-
-    monkeypatch.setattr(type(learner), "_update", spy)
     update(learner, transitions(96))
     assert learner.config.learner_config_dict[MINIBATCH_KEY] == 32
-    assert learner.aux_rows(DISC) == 32.0 and learner.aux_rows(PROXY) == 32.0
-    assert rows == {DISC: 32, PROXY: 32}  # one minibatch each, of 3 SAC steps
+    assert rows["rows"] == 2 * 32  # one minibatch each (discriminator, proxy), of 3 SAC steps
 
     learner = sac_learner(aux_epochs=2)
-    rows.clear()
+    rows["rows"] = 0
     update(learner, transitions(96))
-    sizes = learner._asor_aux_sizes
-    assert learner.aux_rows(PROXY) == 2.0 * sizes[PROXY] == 192.0
-    assert rows[PROXY] == 96  # capped by the 3 minibatches there are
+    assert rows["rows"] == 2 * 2 * 96  # two passes each over the call's 96 rows
 
 
 def test_soft_q_state_values_is_the_twin_minimum_at_the_squashed_mean():
@@ -277,17 +285,6 @@ def test_soft_q_state_values_is_the_policy_expectation_for_discrete_actions():
 
 
 # ------------------------------------------------------------------ several Learners
-def test_even_share_gives_each_rank_its_block_and_drops_the_remainder():
-    rows = torch.arange(11)
-    shares = [connector.even_share(rows, r, 3) for r in range(3)]
-    assert [s.tolist() for s in shares] == [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
-    assert connector.even_share(None, 0, 2) is None
-    x = ProxyInputs(torch.arange(8).reshape(4, 2), None, torch.arange(4) * 10)
-    half = connector.even_share_inputs(x, 1, 2)
-    assert half.features.tolist() == [[4, 5], [6, 7]]
-    assert half.actions is None and half.next_features.tolist() == [20, 30]
-
-
 def test_rank_and_size_and_gather_in_a_one_process_group(tmp_path):
     assert connector.rank_and_size() == (0, 1)
     os.environ.setdefault("MASTER_ADDR", "127.0.0.1")
@@ -508,7 +505,7 @@ def maple_piece_spies(monkeypatch) -> tuple[list, list]:
     """Record what the ASOR piece ranks (batch, discriminator before, result) and the rows it
     gives the bonus to."""
     calls, rows = [], []
-    real_update, real_bonus = connector.asor_update, connector.bonus_on_rows
+    real_update, real_bonus = trainer_module.asor_update, connector.bonus_on_rows
 
     def update_spy(cfg, state, proxy, batch, rng):
         calls.append((batch, copy.deepcopy(state.disc)))
@@ -520,7 +517,7 @@ def maple_piece_spies(monkeypatch) -> tuple[list, list]:
         rows.append(bonus_rows)
         return real_bonus(cfg, state, lam, bonus_rows, gamma)
 
-    monkeypatch.setattr(connector, "asor_update", update_spy)
+    monkeypatch.setattr(trainer_module, "asor_update", update_spy)
     monkeypatch.setattr(connector, "bonus_on_rows", bonus_spy)
     return calls, rows
 
@@ -534,19 +531,24 @@ def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_st
     bonuses, aux = [], []
     calls, rows = maple_piece_spies(monkeypatch)
     real_losses = maple_learner_module.maple_losses
-    real_update = maple_learner_module.MapleTorchLearner._update
+    real_disc, real_proxy = AsorTrainer.train_discriminator, AsorTrainer.train_proxy
 
     def losses_spy(nets_, b, **kw):
         bonuses.append(kw["bonus"].clone())
         return real_losses(nets_, b, **kw)
 
-    def update_spy(self, batch, **kw):
-        aux.append({m: {k: v.clone() for k, v in batch[m].items()} for m in (DISC, PROXY)})
-        return real_update(self, batch, **kw)
+    def disc_spy(self, x, y, *args, **kw):
+        aux.append({"disc_obs": x.clone(), "disc_label": y.clone()})
+        return real_disc(self, x, y, *args, **kw)
+
+    def proxy_spy(self, x, *args, **kw):
+        aux[-1]["proxy_obs"] = x.features.clone()
+        return real_proxy(self, x, *args, **kw)
 
     monkeypatch.setattr(maple_learner_module, "maple_losses", losses_spy)
-    monkeypatch.setattr(maple_learner_module.MapleTorchLearner, "_update", update_spy)
-    disc, proxy = params(learner.module[DISC]), params(learner.module[PROXY])
+    monkeypatch.setattr(AsorTrainer, "train_discriminator", disc_spy)
+    monkeypatch.setattr(AsorTrainer, "train_proxy", proxy_spy)
+    disc, proxy = params(asor_trainer(learner).state), params(asor_trainer(learner).proxy)
     cols, batch = maple_batch(learner)
     t = {k: torch.from_numpy(v) for k, v in cols.items()}
     expected_values = state_values(
@@ -580,10 +582,11 @@ def test_maple_update_ranks_the_real_states_and_adds_the_bonus_to_every_valid_st
     torch.testing.assert_close(bonuses[0], expected)
     assert (bonuses[0][t["valid"]] < 0).all()
     # the discriminator and the proxy train on the real states' partition, in the same update
-    torch.testing.assert_close(aux[0][DISC][Columns.OBS], result.disc_features)
-    torch.testing.assert_close(aux[0][DISC]["asor_label"], result.disc_labels)
-    torch.testing.assert_close(aux[0][PROXY][Columns.OBS], t["real_obs"])
-    assert changed(disc, learner.module[DISC]) and changed(proxy, learner.module[PROXY])
+    torch.testing.assert_close(aux[0]["disc_obs"], result.disc_features)
+    torch.testing.assert_close(aux[0]["disc_label"], result.disc_labels)
+    torch.testing.assert_close(aux[0]["proxy_obs"], t["real_obs"])
+    assert changed(disc, asor_trainer(learner).state)
+    assert changed(proxy, asor_trainer(learner).proxy)
     assert results[DISC]["lambda"].peek() == pytest.approx(0.1)
 
 
@@ -615,7 +618,7 @@ def test_maple_asor_partition_follows_the_asor_seed(monkeypatch):
 
 def test_maple_srpo_mode_trains_without_a_proxy():
     learner = maple_learner(preset="paper", mode="srpo", lambda_=0.1)
-    assert PROXY not in learner.module.keys()
-    disc = params(learner.module[DISC])
+    assert asor_trainer(learner).proxy is None
+    disc = params(asor_trainer(learner).state)
     results = learner.update(batch=maple_batch(learner)[1], timesteps={"maple_gradient_steps": 0})
-    assert changed(disc, learner.module[DISC]) and PROXY not in results
+    assert changed(disc, asor_trainer(learner).state) and "rnd_loss" not in results[DISC]
