@@ -1,7 +1,7 @@
 """`AsorTrainer`: ASOR's networks and their training for one policy, in one call per train batch.
 
 Plain torch, no Ray. `step(batch)` runs the paper's steps 1-7 (`rank`, i.e. `asor_update`:
-D_P, Δr from ω before this update, λ), then trains (`train`) the discriminator on D_P (1) vs D_Q (0) and the
+D_P, Δr from ω before this update, λ), then trains (`learn`) the discriminator on D_P (1) vs D_Q (0) and the
 visitation proxy on the batch's states, each with its own Adam optimiser, for `aux_epochs`
 passes over its batch (one when unset) in minibatches of the caller's size, and returns Δr and
 the metrics of both. The caller adds Δr to its rewards; nothing of it enters the policy's
@@ -76,19 +76,19 @@ class AsorTrainer(nn.Module):
         rows: float | None = None,
         share: tuple[int, int] = (0, 1),
     ) -> AsorResult:
-        """`rank(batch)` then `train(...)` on what it returned: Δr with ω from before this
-        call, then the networks' steps. See `train` for the arguments."""
+        """`rank(batch)` then `learn(...)` on what it returned: Δr with ω from before this
+        call, then the networks' steps. See `learn` for the arguments."""
         result = self.rank(batch)
-        self.train(result, batch, minibatch_size, rows, share)
+        self.learn(result, batch, minibatch_size, rows, share)
         return result
 
     def rank(self, batch: AsorBatch) -> AsorResult:
         """Steps 1-7 on `batch` (`asor_update`): D_P, Δr and λ, the networks not yet trained
         (a caller that needs ω of other rows before training, e.g. MAPLE's model rows, reads
-        it between `rank` and `train`)."""
+        it between `rank` and `learn`)."""
         return asor_update(self.cfg, self.state, self.proxy, batch, self.rng)
 
-    def train(
+    def learn(
         self,
         result: AsorResult,
         batch: AsorBatch,

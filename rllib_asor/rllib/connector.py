@@ -220,7 +220,7 @@ class AsorRewardConnector(ConnectorV2):
                 pb[column] = bonus_on_rows(
                     self.asor, trainer.state, result.lam, self.adapter.bonus_rows(pb), self.gamma
                 )
-        trainer.train(result, whole, self.minibatch_size, aux_rows, share=(rank, size))
+        trainer.learn(result, whole, self.minibatch_size, aux_rows, share=(rank, size))
         if metrics is not None and result.metrics:
             metrics.log_dict(result.metrics, key=module_id, window=1)
         if built is None or not self.adapter.shares_values_with_gae:

@@ -1,5 +1,5 @@
-"""ASOR reaches every algorithm through one door: `asor_update` is called by the ASOR
-learner-connector piece only, the bonus is normalised in one function, no Learner reads the
+"""ASOR reaches every algorithm through one door: `asor_update` is called by the `AsorTrainer`
+only, and the trainer by the ASOR learner-connector piece only, the bonus is normalised in one function, no Learner reads the
 piece's state, and each ASOR Learner's differences live in its algorithm's adapter."""
 
 from __future__ import annotations
@@ -31,8 +31,10 @@ def _calls(name: str) -> list[str]:
     return sorted(set(found))
 
 
-def test_asor_update_runs_from_the_connector_piece_only():
-    assert _calls("asor_update") == ["rllib/connector.py:_augment"]
+def test_asor_update_runs_from_the_trainer_and_the_trainer_from_the_connector_piece_only():
+    assert _calls("asor_update") == ["asor/trainer.py:rank"]
+    assert _calls("rank") == ["asor/trainer.py:step", "rllib/connector.py:_augment"]
+    assert _calls("learn") == ["asor/trainer.py:step", "rllib/connector.py:_augment"]
 
 
 def test_the_bonus_is_normalised_in_one_function():

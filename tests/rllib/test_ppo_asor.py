@@ -10,17 +10,16 @@ from ray.rllib.algorithms.algorithm import Algorithm
 from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
 from ray.rllib.core.rl_module.multi_rl_module import MultiRLModule
-from ray.rllib.policy.sample_batch import MultiAgentBatch, SampleBatch
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
-from ray.rllib.utils.minibatch_utils import MiniBatchCyclicIterator
 
 import rllib_asor
 import rllib_asor.envs  # noqa: F401  (registers rllib_asor/LavaWorld-v0)
 from rllib_asor.asor.reward import reward_bonus
+from rllib_asor.asor.trainer import AsorTrainer
 from rllib_asor.rllib.connector import AsorRewardConnector
-from rllib_asor.rllib.learners import policy_minibatches
+from rllib_asor.rllib.modules import TRAINER_STATE
 
-DISC, PROXY = "asor_disc.default_policy", "asor_proxy.default_policy"
+DISC = "asor_disc.default_policy"
 
 
 def lava_ppo_config() -> PPOConfig:
@@ -56,15 +55,17 @@ def sample_episodes(algo, n):
     return copy.deepcopy(algo.env_runner.sample(num_timesteps=n, random_actions=False))
 
 
+def asor_trainer(algo) -> AsorTrainer:
+    return algo.learner_group._learner.module[DISC].unwrapped().trainer
+
+
 def aux_state(algo):
-    module = algo.learner_group._learner.module
-    return {
-        mid: {k: v.clone() for k, v in module[mid].state_dict().items()} for mid in (DISC, PROXY)
-    }
+    """ASOR's networks and statistics by name ("state.disc...", "proxy.rnd...")."""
+    return {k: v.clone() for k, v in asor_trainer(algo).state_dict().items()}
 
 
 def test_with_asor_wires_learner_modules_and_settings(algo):
-    assert set(algo.learner_group._learner.module.keys()) == {DEFAULT_MODULE_ID, DISC, PROXY}
+    assert set(algo.learner_group._learner.module.keys()) == {DEFAULT_MODULE_ID, DISC}
     assert algo.config.learner_config_dict["asor"]["lambda_"] == 0.1
     # learner-only: the (single-agent) env runner holds just the policy, no aux modules.
     assert not isinstance(algo.env_runner.module, MultiRLModule)
@@ -74,23 +75,35 @@ def test_paper_preset_rewards_change_by_lambda_times_log_omega(algo):
     learner = algo.learner_group._learner
     episodes = sample_episodes(algo, 200)
     env_total = sum(float(np.sum(e.get_rewards())) for e in episodes)
-    batch = learner._learner_connector(
-        rl_module=learner.module,
-        batch={},
-        episodes=episodes,
-        shared_data={},
-        metrics=learner.metrics,
-    )
+    disc_before = copy.deepcopy(asor_trainer(algo).state.disc)  # trained after the bonus
+    trained = []
+    real_train = AsorTrainer.train_discriminator
+
+    def spy(self, x, y, *args, **kwargs):
+        trained.append((x, y))
+        return real_train(self, x, y, *args, **kwargs)
+
+    AsorTrainer.train_discriminator = spy
+    try:
+        batch = learner._learner_connector(
+            rl_module=learner.module,
+            batch={},
+            episodes=episodes,
+            shared_data={},
+            metrics=learner.metrics,
+        )
+    finally:
+        AsorTrainer.train_discriminator = real_train
     pb = batch[DEFAULT_MODULE_ID]
     valid = pb[Columns.LOSS_MASK].bool()
+    ((disc_obs, labels),) = trained
     with torch.no_grad():
-        logits = learner.module[DISC].logits(batch[DISC][Columns.OBS])
+        logits = disc_before(disc_obs)
     expected = env_total + 0.1 * reward_bonus(logits).sum().item()
     assert pb[Columns.REWARDS][valid].sum().item() == pytest.approx(expected, rel=1e-4, abs=1e-4)
-    # The discriminator batch holds exactly the valid steps, ~ρ1ρ2 of them labelled real.
-    assert batch[DISC][Columns.OBS].shape[0] == int(valid.sum())
-    real_fraction = batch[DISC]["asor_label"].mean().item()
-    assert 0.2 <= real_fraction <= 0.3
+    # The discriminator trains on exactly the valid steps, ~ρ1ρ2 of them labelled real.
+    assert disc_obs.shape[0] == int(valid.sum())
+    assert 0.2 <= labels.mean().item() <= 0.3
 
 
 def test_two_iterations_train_aux_modules_and_report_metrics(algo):
@@ -98,12 +111,12 @@ def test_two_iterations_train_aux_modules_and_report_metrics(algo):
     for _ in range(2):
         result = algo.train()
     after = aux_state(algo)
-    for mid in (DISC, PROXY):
-        changed = [k for k in before[mid] if not torch.equal(before[mid][k], after[mid][k])]
-        assert changed, f"{mid} did not change"
+    for net in ("state.disc.net.", "proxy.rnd.predictor."):
+        changed = [k for k in before if k.startswith(net) and not torch.equal(before[k], after[k])]
+        assert changed, f"{net} did not change"
     count, target = "proxy.rnd.obs_rms.count", "proxy.rnd.target.0.weight"
-    assert not torch.equal(before[PROXY][count], after[PROXY][count])
-    assert torch.equal(before[PROXY][target], after[PROXY][target])
+    assert not torch.equal(before[count], after[count])
+    assert torch.equal(before[target], after[target])
     asor = result["asor"]
     for key in (
         "disc_loss",
@@ -127,10 +140,16 @@ def test_checkpoint_restores_aux_weights_and_normaliser(algo, tmp_path):
     restored = Algorithm.from_checkpoint(str(tmp_path))
     try:
         got = aux_state(restored)
-        for mid in (DISC, PROXY):
-            assert saved[mid].keys() == got[mid].keys()
-            for k in saved[mid]:
-                assert torch.equal(saved[mid][k], got[mid][k]), (mid, k)
+        assert saved.keys() == got.keys()
+        for k in saved:
+            assert torch.equal(saved[k], got[k]), k
+        # the optimisers' moments too
+        mine, theirs = asor_trainer(algo), asor_trainer(restored)
+        for opt in ("disc_optimizer", "proxy_optimizer"):
+            a, b = getattr(mine, opt).state_dict(), getattr(theirs, opt).state_dict()
+            for i, moments in a["state"].items():
+                for name, value in moments.items():
+                    assert torch.equal(value, b["state"][i][name]), (opt, i, name)
         assert (
             restored.config.learner_config_dict["asor"] == algo.config.learner_config_dict["asor"]
         )
@@ -186,7 +205,7 @@ def test_nan_observation_is_a_clear_error(algo):
 def test_srpo_mode_builds_no_proxy(ray_session):
     algo = lava_ppo(mode="srpo").build_algo()
     try:
-        assert PROXY not in algo.learner_group._learner.module.keys()
+        assert asor_trainer(algo).proxy is None
         result = algo.train()
         assert "rnd_loss" not in result["asor"] and result["asor"][
             "real_fraction"
@@ -227,16 +246,21 @@ def test_with_asor_rejects_unsupported_algorithm():
 def test_aux_modules_get_aux_epochs_passes_while_policy_gets_num_epochs(algo):
     learner = algo.learner_group._learner
 
-    def adam_steps(module_id):
-        state = learner.get_optimizer(module_id=module_id).state
+    def adam_steps(optimizer):
+        state = optimizer.state
         return max(int(s["step"]) for s in state.values()) if state else 0
 
-    before = {m: adam_steps(m) for m in (DEFAULT_MODULE_ID, DISC, PROXY)}
+    optimizers = {
+        "policy": learner.get_optimizer(module_id=DEFAULT_MODULE_ID),
+        "disc": asor_trainer(algo).disc_optimizer,
+        "proxy": asor_trainer(algo).proxy_optimizer,
+    }
+    before = {m: adam_steps(o) for m, o in optimizers.items()}
     algo.train()
-    steps = {m: adam_steps(m) - before[m] for m in before}
+    steps = {m: adam_steps(o) - before[m] for m, o in optimizers.items()}
     # num_epochs=2 for the policy, aux_epochs=1 (default) for the discriminator and RND.
-    assert steps[DISC] == steps[PROXY]
-    assert 0.35 * steps[DEFAULT_MODULE_ID] <= steps[DISC] <= 0.65 * steps[DEFAULT_MODULE_ID]
+    assert steps["disc"] == steps["proxy"]
+    assert 0.35 * steps["policy"] <= steps["disc"] <= 0.65 * steps["policy"]
 
 
 def test_with_asor_makes_our_env_ids_buildable_on_remote_env_runners(ray_session):
@@ -255,7 +279,7 @@ def test_rnd_per_dynamics_counts_with_the_envs_dynamics_ids(ray_session):
     algo = lava_ppo(proxy="rnd_per_dynamics", dynamics_buckets=8).build_algo()
     try:
         result = algo.train()
-        proxy = algo.learner_group._learner.module[PROXY].unwrapped().proxy.rnd
+        proxy = asor_trainer(algo).proxy.rnd
         # The lava rows 2..5 are the dynamics ids: exactly their buckets have been seen.
         assert torch.nonzero(proxy.seen).flatten().tolist() == [2, 3, 4, 5]
         assert np.isfinite(result["asor"]["rnd_loss"]) and result["asor"]["real_fraction"] > 0
@@ -279,16 +303,26 @@ def test_default_is_the_robust_preset():
 
 def test_robust_rewards_change_by_the_updates_delta_and_archive_fills(robust):
     learner = robust.learner_group._learner
-    state = learner.module[DISC].unwrapped().state
+    state = asor_trainer(robust).state
+    real_train, trained = AsorTrainer.train_discriminator, []
+
+    def spy(self, x, y, *args, **kwargs):
+        trained.append(y)
+        return real_train(self, x, y, *args, **kwargs)
+
     for _ in range(3):
         result = robust.train()
     assert len(state.archive) > 0 and result["asor"]["archive_states"] == len(state.archive)
     episodes = sample_episodes(robust, 300)
     env_total = sum(float(np.sum(e.get_rewards())) for e in episodes)
     metrics = type(learner.metrics)()
-    batch = learner._learner_connector(
-        rl_module=learner.module, batch={}, episodes=episodes, shared_data={}, metrics=metrics
-    )
+    AsorTrainer.train_discriminator = spy
+    try:
+        batch = learner._learner_connector(
+            rl_module=learner.module, batch={}, episodes=episodes, shared_data={}, metrics=metrics
+        )
+    finally:
+        AsorTrainer.train_discriminator = real_train
     pb = batch[DEFAULT_MODULE_ID]
     valid = pb[Columns.LOSS_MASK].bool()
     stats = metrics.reduce()[DISC]
@@ -298,27 +332,15 @@ def test_robust_rewards_change_by_the_updates_delta_and_archive_fills(robust):
     bound = stats["lambda"] * 2.0 * 3.0 + 1e-6
     assert -bound <= stats["aug_reward_min"] and stats["aug_reward_max"] <= bound
     # The discriminator batch: archive states (label 1) and the whole batch (label 0).
-    labels = batch[DISC]["asor_label"]
+    (labels,) = trained
     assert int((labels == 0).sum()) == int(valid.sum()) and int((labels == 1).sum()) > 0
 
 
-@pytest.mark.parametrize("rows", [1, 63, 64, 1024, 1040])
-@pytest.mark.parametrize("minibatch", [64, 256])
-def test_policy_minibatches_matches_rllibs_iterator_on_the_policy_alone(rows, minibatch):
-    policy = SampleBatch({"x": np.arange(rows)})
-    longer_disc = SampleBatch({"x": np.arange(rows + 300)})
-    alone = MiniBatchCyclicIterator(
-        MultiAgentBatch({DEFAULT_MODULE_ID: policy}, rows), num_epochs=3, minibatch_size=minibatch
-    )
-    both = MultiAgentBatch({DEFAULT_MODULE_ID: policy, DISC: longer_disc}, rows)
-    assert policy_minibatches(both, 3, minibatch) == sum(1 for _ in alone)
-
-
 def test_policy_gets_num_epochs_even_when_the_discriminator_batch_is_longer(robust):
-    """RLlib's iterator runs until every module covered num_epochs; the discriminator's batch
-    (archive states + the whole batch) is longer than the policy's, which must not add epochs."""
+    """The discriminator's batch (archive states + the whole batch) is longer than the policy's;
+    it trains outside the policy's minibatches, which keep PPO's count."""
     learner = robust.learner_group._learner
-    while len(learner.module[DISC].unwrapped().state.archive) == 0:
+    while len(asor_trainer(robust).state.archive) == 0:
         robust.train()
     episodes = sample_episodes(robust, 256)
     policy_rows = sum(len(e) + 1 for e in episodes)  # + PPO's bootstrap row per episode chunk
@@ -332,7 +354,6 @@ def test_policy_gets_num_epochs_even_when_the_discriminator_batch_is_longer(robu
         shuffle_batch_per_epoch=True,
     )
     steps = max(int(s["step"]) for s in optimizer.state.values()) - before
-    assert learner._asor_aux_sizes[DISC] > policy_rows
     assert steps == math.ceil(2 * policy_rows / 64)
 
 
@@ -340,7 +361,7 @@ def test_robust_checkpoint_restores_the_archive_and_normalisers(robust, tmp_path
     robust.train()
     robust.save_to_path(str(tmp_path))
     saved = aux_state(robust)
-    assert saved[DISC]["state.archive.size"].sum() > 0
+    assert saved["state.archive.size"].sum() > 0
     restored = Algorithm.from_checkpoint(str(tmp_path))
     try:
         got = aux_state(restored)
@@ -352,7 +373,7 @@ def test_robust_checkpoint_restores_the_archive_and_normalisers(robust, tmp_path
             "state.critic_ready",
             "state.disc.input_rms.count",
         ):
-            assert torch.equal(saved[DISC][k], got[DISC][k]), k
+            assert torch.equal(saved[k], got[k]), k
     finally:
         restored.stop()
 
@@ -363,14 +384,15 @@ def test_learner_only_modules_send_nothing_to_env_runners(robust):
     from ray.rllib.core import COMPONENT_LEARNER, COMPONENT_RL_MODULE
 
     robust.train()
-    ids = [DEFAULT_MODULE_ID, DISC, PROXY]
+    ids = [DEFAULT_MODULE_ID, DISC]
     comps = [f"{COMPONENT_LEARNER}/{COMPONENT_RL_MODULE}/{m}" for m in ids]
     lg = robust.learner_group
     sent = lg.get_state(components=comps, inference_only=True)[COMPONENT_LEARNER]
-    assert sent[COMPONENT_RL_MODULE][DISC] == {} and sent[COMPONENT_RL_MODULE][PROXY] == {}
+    assert sent[COMPONENT_RL_MODULE][DISC] == {}
     assert sent[COMPONENT_RL_MODULE][DEFAULT_MODULE_ID]  # the policy's weights still go
     full = lg.get_state(components=comps)[COMPONENT_LEARNER][COMPONENT_RL_MODULE]
-    assert full[DISC]["state.archive.size"].sum() > 0 and full[PROXY]
+    modules = full[DISC][TRAINER_STATE]["modules"]
+    assert modules["state.archive.size"].sum() > 0 and "proxy.rnd.predictor.0.weight" in modules
     # what PPO's training_step syncs reaches the runner and changes its policy's weights
     robust.env_runner_group.sync_weights(
         from_worker_or_learner_group=lg, policies=set(ids), inference_only=True

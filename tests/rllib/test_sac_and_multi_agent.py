@@ -42,7 +42,7 @@ def test_sac_asor_update_trains_aux_and_values_come_from_critics(ray_session, en
         # V(s) = min Q(s, π(s)): Pendulum's returns are negative, CartPole's positive.
         assert (asor["value_mean"] < 0) == (env == "Pendulum-v1")
         learner = algo.learner_group._learner
-        assert {"asor_disc.default_policy", "asor_proxy.default_policy"} <= set(
+        assert {"asor_disc.default_policy"} <= set(
             learner.module.keys()
         )
     finally:
@@ -65,7 +65,7 @@ def test_multi_agent_ppo_gets_one_discriminator_per_trained_policy(ray_session):
     algo = rllib_asor.with_asor(config, lambda_=0.05).build_algo()
     try:
         modules = set(algo.learner_group._learner.module.keys())
-        assert modules == {"p0", "p1", "asor_disc.p0", "asor_proxy.p0"}
+        assert modules == {"p0", "p1", "asor_disc.p0"}
         result = algo.train()
         # Only p0 is regularised: one discriminator, so asor/... is flat (not keyed by policy).
         assert set(result["asor"]) >= {"disc_loss", "aug_reward_mean", "rnd_loss"}

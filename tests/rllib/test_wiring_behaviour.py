@@ -44,10 +44,9 @@ from rllib_asor.rllib.learners import (
     AsorMapleTorchLearner,
     AsorPPOTorchLearner,
     AsorSACTorchLearner,
-    disc_module_id,
-    proxy_module_id,
+    asor_module_id,
 )
-from rllib_asor.rllib.modules import AsorDiscriminatorModule, AsorProxyModule
+from rllib_asor.rllib.modules import AsorModule
 from rllib_asor.rllib.trainable import _asor_init, asor_trainable
 from rllib_asor.rllib.wiring import (
     SUPPORTED,
@@ -64,7 +63,7 @@ OBS_B = gym.spaces.Box(-5, 5, (4,), np.float32)
 ACT_B = gym.spaces.Discrete(3)
 SMALL = {"disc_hiddens": [8], "rnd_hiddens": [8], "rnd_embedding_dim": 4, "seed": 0}
 SETTINGS = {"lambda_": 0.3, "seed": 7}
-DISC, PROXY = disc_module_id(DEFAULT_MODULE_ID), proxy_module_id(DEFAULT_MODULE_ID)
+DISC = asor_module_id(DEFAULT_MODULE_ID)
 
 
 def stored(**settings) -> dict:
@@ -233,8 +232,8 @@ def test_a_policies_to_train_list_is_kept_and_the_aux_modules_are_always_trained
     assert isinstance(to_train, _AlsoTrainAux) and to_train.user == ["a"]
     assert to_train("a") is True
     assert to_train("b") is False
-    assert to_train(disc_module_id("a")) is True
-    assert to_train(proxy_module_id("b")) is True  # any aux module id
+    assert to_train(asor_module_id("a")) is True
+    assert to_train(asor_module_id("b")) is True  # any ASOR module id
     assert config.policies_to_train == ["a"]
 
 
@@ -249,7 +248,7 @@ def test_a_policies_to_train_callable_gets_module_id_and_batch_and_aux_modules_b
     assert to_train.user is user
     assert to_train("a", "batch") is True
     assert to_train("b", "other") is False
-    assert to_train(disc_module_id("b"), "batch") is True
+    assert to_train(asor_module_id("b"), "batch") is True
     assert calls == [("a", "batch"), ("b", "other")]
 
 
@@ -283,26 +282,25 @@ def test_trained_policy_ids(config, pids):
 
 
 # ------------------------------------------------------------------ module specs
-def test_single_agent_gets_a_learner_only_discriminator_and_proxy_with_the_settings():
+def test_single_agent_gets_one_learner_only_asor_module_with_the_settings():
     out = with_asor(ppo(), **SETTINGS)
     got = specs(out)
-    assert list(got) == [DEFAULT_MODULE_ID, DISC, PROXY]
+    assert list(got) == [DEFAULT_MODULE_ID, DISC]
     assert got[DEFAULT_MODULE_ID].module_class is None
-    for mid, cls in ((DISC, AsorDiscriminatorModule), (PROXY, AsorProxyModule)):
-        assert got[mid].module_class is cls
-        assert got[mid].learner_only is True
-        assert got[mid].model_config == {"asor": stored(**SETTINGS)}
-        assert got[mid].observation_space is None and got[mid].action_space is None
+    assert got[DISC].module_class is AsorModule
+    assert got[DISC].learner_only is True
+    assert got[DISC].model_config == {"asor": stored(**SETTINGS)}
+    assert got[DISC].observation_space is None and got[DISC].action_space is None
 
 
-def test_srpo_mode_wires_no_proxy_module():
+def test_srpo_mode_wires_the_same_one_module():
     assert list(specs(with_asor(ppo(), mode="srpo"))) == [DEFAULT_MODULE_ID, DISC]
 
 
 def test_multi_agent_aux_modules_belong_to_the_trained_policies_and_take_their_spaces():
     got = specs(with_asor(two_policies(policies_to_train=["b"])))
-    assert set(got) == {"a", "b", disc_module_id("b"), proxy_module_id("b")}
-    for mid in (disc_module_id("b"), proxy_module_id("b")):
+    assert set(got) == {"a", "b", asor_module_id("b")}
+    for mid in (asor_module_id("b"),):
         assert got[mid].observation_space == OBS_B
         assert got[mid].action_space == ACT_B
         assert got[mid].learner_only is True
@@ -310,9 +308,9 @@ def test_multi_agent_aux_modules_belong_to_the_trained_policies_and_take_their_s
 
 def test_multi_agent_without_policies_to_train_regularises_every_policy():
     got = specs(with_asor(two_policies(), mode="srpo"))
-    assert set(got) == {"a", "b", disc_module_id("a"), disc_module_id("b")}
-    assert got[disc_module_id("a")].observation_space == OBS
-    assert got[disc_module_id("b")].action_space == ACT_B
+    assert set(got) == {"a", "b", asor_module_id("a"), asor_module_id("b")}
+    assert got[asor_module_id("a")].observation_space == OBS
+    assert got[asor_module_id("b")].action_space == ACT_B
 
 
 def test_an_existing_single_module_spec_is_copied_to_every_policy_with_its_settings():
@@ -332,9 +330,9 @@ def test_an_existing_multi_module_spec_keeps_its_policies_and_drops_stale_aux_mo
     specs(once)["a"].module_class = DefaultPPOTorchRLModule
     twice = with_asor(once, mode="srpo", seed=3)
     got = specs(twice)
-    assert set(got) == {"a", "b", disc_module_id("a"), disc_module_id("b")}
+    assert set(got) == {"a", "b", asor_module_id("a"), asor_module_id("b")}
     assert got["a"].module_class is DefaultPPOTorchRLModule
-    assert got[disc_module_id("a")].model_config == {"asor": stored(mode="srpo", seed=3)}
+    assert got[asor_module_id("a")].model_config == {"asor": stored(mode="srpo", seed=3)}
     assert twice.learner_config_dict["asor"] == stored(mode="srpo", seed=3)
 
 
@@ -353,7 +351,7 @@ def test_a_users_multi_module_spec_keeps_its_class_and_settings():
     out = with_asor(two_policies().rl_module(rl_module_spec=user), mode="srpo")
     got = out._rl_module_spec
     assert got.multi_rl_module_class is _TeamModule and got.model_config == {"shared": 1}
-    assert set(got.rl_module_specs) == {"a", "b", disc_module_id("a"), disc_module_id("b")}
+    assert set(got.rl_module_specs) == {"a", "b", asor_module_id("a"), asor_module_id("b")}
 
 
 def test_aux_modules_inherit_their_policys_spaces_when_built_and_keep_their_own():
@@ -367,11 +365,11 @@ def test_aux_modules_inherit_their_policys_spaces_when_built_and_keep_their_own(
                 action_space=ACT,
                 model_config={"fcnet_hiddens": [8]},
             ),
-            disc_module_id(pid): RLModuleSpec(
-                module_class=AsorDiscriminatorModule, learner_only=True, model_config=asor
+            asor_module_id(pid): RLModuleSpec(
+                module_class=AsorModule, learner_only=True, model_config=asor
             ),
-            proxy_module_id(pid): RLModuleSpec(
-                module_class=AsorProxyModule,
+            asor_module_id("other"): RLModuleSpec(  # spaces of its own: kept
+                module_class=AsorModule,
                 learner_only=True,
                 observation_space=OBS_B,
                 action_space=ACT_B,
@@ -379,17 +377,17 @@ def test_aux_modules_inherit_their_policys_spaces_when_built_and_keep_their_own(
             ),
         }
     )
-    disc = spec.build(disc_module_id(pid))  # one module, as asked
-    assert isinstance(disc, AsorDiscriminatorModule)
+    disc = spec.build(asor_module_id(pid))  # one module, as asked
+    assert isinstance(disc, AsorModule)
     assert (disc.observation_space, disc.action_space) == (OBS, ACT)
     multi = spec.build()
     assert isinstance(multi, MultiRLModule)
     assert (
-        multi[disc_module_id(pid)].observation_space,
-        multi[disc_module_id(pid)].action_space,
+        multi[asor_module_id(pid)].observation_space,
+        multi[asor_module_id(pid)].action_space,
     ) == (OBS, ACT)
-    proxy = multi[proxy_module_id(pid)]
-    assert (proxy.observation_space, proxy.action_space) == (OBS_B, ACT_B)
+    own = multi[asor_module_id("other")]
+    assert (own.observation_space, own.action_space) == (OBS_B, ACT_B)
 
 
 # ------------------------------------------------------------------ Tune trainables
@@ -497,11 +495,11 @@ def test_lift_asor_metrics_gives_a_flat_dict_of_floats_for_one_policy():
                 "disc_acc_real": 0.75,
                 "disc_acc_fake": 0.25,
                 "lambda": 1,
+                "rnd_loss": np.float64(0.125),
                 "num_module_steps_trained": 60,  # not an ASOR metric
             },
-            PROXY: {"rnd_loss": np.float64(0.125), "disc_loss": 0.5},
             DEFAULT_MODULE_ID: {"disc_loss": 9.0, "policy_loss": 1.0},
-            disc_module_id("not_a_dict"): 3.0,
+            asor_module_id("not_a_dict"): 3.0,
         }
     }
     lifted = lift_asor_metrics(result)
@@ -519,9 +517,8 @@ def test_lift_asor_metrics_gives_a_flat_dict_of_floats_for_one_policy():
 def test_lift_asor_metrics_keys_several_policies_by_policy_id():
     result = {
         "learners": {
-            disc_module_id("a"): {"disc_acc_real": 0.5, "disc_acc_fake": 0.75},
-            disc_module_id("b"): {"disc_acc_real": 1.0},  # only one accuracy: no disc_acc
-            proxy_module_id("b"): {"ensemble_loss": 2.0},
+            asor_module_id("a"): {"disc_acc_real": 0.5, "disc_acc_fake": 0.75},
+            asor_module_id("b"): {"disc_acc_real": 1.0, "ensemble_loss": 2.0},  # no disc_acc
         }
     }
     assert lift_asor_metrics(result) == {
