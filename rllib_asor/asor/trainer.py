@@ -112,9 +112,10 @@ class AsorTrainer(nn.Module):
                 *(even_share(getattr(proxy_in, f.name), rank, size)
                   for f in dataclasses.fields(ProxyInputs))
             )  # fmt: skip
-        metrics = self.train_discriminator(disc_feats, labels, minibatch_size, rows, size > 1)
-        if self.proxy is not None and self.proxy_optimizer is not None:
-            metrics.update(self.train_proxy(proxy_in, minibatch_size, rows, size > 1))
+        with torch.enable_grad():  # callers may run under no_grad (RLlib's connectors do)
+            metrics = self.train_discriminator(disc_feats, labels, minibatch_size, rows, size > 1)
+            if self.proxy is not None and self.proxy_optimizer is not None:
+                metrics.update(self.train_proxy(proxy_in, minibatch_size, rows, size > 1))
         if result.metrics:
             result.metrics.update(metrics)
 

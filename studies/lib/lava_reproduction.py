@@ -119,7 +119,7 @@ def pseudo_counts(learner: Any) -> dict[int, list[list[float]]]:
     from rllib_asor.asor.proxy import ProxyInputs
     from rllib_asor.envs.lava import GRID_SIZE, LAVA_ROWS, LavaWorldEnv, observation_at
 
-    proxy = learner.module["asor_proxy.default_policy"]
+    proxy = learner.module["asor_disc.default_policy"].unwrapped().trainer
     grids = {}
     for row in LAVA_ROWS:
         grid = np.full((GRID_SIZE, GRID_SIZE), np.nan)

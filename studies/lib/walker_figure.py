@@ -41,7 +41,7 @@ def rollouts(algo, episodes: int, explore: bool, seed: int = 3000) -> list[dict]
     from rllib_asor.asor.reward import reward_bonus
     from rllib_asor.evaluation.rollout import module_actor, rollout
 
-    disc = algo.learner_group._learner.module["asor_disc.default_policy"]
+    disc = algo.learner_group._learner.module["asor_disc.default_policy"].unwrapped().trainer.state
     policy = module_actor(algo.get_module(), explore=explore)()
     states: list[list[np.ndarray]] = []
     rewards: list[list[float]] = []
@@ -63,7 +63,7 @@ def rollouts(algo, episodes: int, explore: bool, seed: int = 3000) -> list[dict]
     eps = []
     for s, r, ep in zip(states, rewards, done.episodes, strict=True):
         with torch.no_grad():
-            log_omega = reward_bonus(disc.logits(torch.as_tensor(np.stack(s))), "log", -5.0)
+            log_omega = reward_bonus(disc.disc(torch.as_tensor(np.stack(s))), "log", -5.0)
         eps.append({"rewards": r, "log_omega": log_omega.numpy().tolist(), "fell": ep.terminated})
     return eps
 

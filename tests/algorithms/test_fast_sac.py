@@ -241,24 +241,30 @@ def test_fast_sac_asor_runs_asor_once_per_learner_call(ray_session):
             return original(batch)
 
         learner._flat_batch_hook = hook
-        steps, aux_steps = [], []  # policy rows of every gradient step; aux modules in it
-        update = learner._cap_aux_passes
+        steps, aux_steps = [], []  # modules of every gradient step; ASOR's networks' steps
+        update = learner._update
 
-        def cap(batch):
-            kept = update(batch)
-            steps.append(len(kept["default_policy"][Columns.REWARDS]))
-            aux_steps.append(sorted(m for m in kept if m != "default_policy"))
-            return kept
+        def counted(batch, **kwargs):
+            steps.append(sorted(batch.keys()))
+            return update(batch, **kwargs)
 
-        learner._cap_aux_passes = cap
+        learner._update = counted
+        trainer = learner.module["asor_disc.default_policy"].unwrapped().trainer
+        minibatches = trainer._minibatches
+
+        def recorded(n, size, rows):
+            for idx in minibatches(n, size, rows):
+                aux_steps.append(len(idx))
+                yield idx
+
+        trainer._minibatches = recorded
         for _ in range(3):
             result = algo.train()
         assert piece_calls and set(piece_calls) == {32 * STEPS_PER_CALL}
-        # the aux modules' batches do not add gradient steps: STEPS_PER_CALL per call
-        assert len(steps) == STEPS_PER_CALL * len(piece_calls) and set(steps) == {32}
-        # ... and by default they train on the first minibatch of each call only
-        aux = ["asor_disc.default_policy", "asor_proxy.default_policy"]
-        assert aux_steps == ([aux] + [[]] * (STEPS_PER_CALL - 1)) * len(piece_calls)
+        # ASOR adds no gradient step and no module to the policy's: STEPS_PER_CALL per call
+        assert steps == [["default_policy"]] * (STEPS_PER_CALL * len(piece_calls))
+        # ... and by default its networks train on one minibatch of each call only
+        assert aux_steps == [32, 32] * len(piece_calls)  # the discriminator, the proxy
         assert np.isfinite(result["asor"]["disc_loss"])
         assert {"asor_disc.default_policy"} <= set(result["learners"])
     finally:

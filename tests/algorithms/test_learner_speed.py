@@ -130,10 +130,8 @@ def test_without_the_drop_ppo_still_trains_the_masked_rows(ray_session):
         result = algo.train()
         policy_rows = result["learners"][DEFAULT_MODULE_ID]["num_module_steps_trained"]
         assert policy_rows > 2 * result["env_runners"]["num_env_steps_sampled"]
-        # The aux modules leave the iterator after their one pass (aux_epochs unset).
-        disc_rows = result["learners"][DISC]["num_module_steps_trained"]
-        size = algo.learner_group._learner._asor_aux_sizes[DISC]
-        assert size <= disc_rows < size + 64
+        # ASOR's module trains outside RLlib's minibatch loop: RLlib trains no rows of it
+        assert "num_module_steps_trained" not in result["learners"].get(DISC, {})
     finally:
         algo.stop()
 
@@ -191,7 +189,7 @@ def test_gae_takes_asors_critic_values_and_computes_what_rllibs_gae_does(ray_ses
 @pytest.mark.timeout(120)
 def test_an_update_without_minibatch_size_ends_after_the_policys_epochs(ray_session):
     """Without a minibatch size RLlib's iterator runs until every module it tracks covered
-    num_epochs; the aux modules that left after their pass must not keep it running."""
+    num_epochs; ASOR's module is not in the batch and must not keep it running."""
     algo = rllib_asor.with_asor(lava_ppo_config(), seed=0).build_algo()
     try:
         learner = algo.learner_group._learner

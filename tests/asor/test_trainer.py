@@ -137,3 +137,12 @@ def test_even_shares_are_equal_blocks_in_rank_order():
     rows = torch.arange(10)
     assert [even_share(rows, r, 3).tolist() for r in range(3)] == [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
     assert even_share(None, 0, 2) is None
+
+
+def test_the_networks_train_when_called_under_no_grad():
+    """RLlib runs Learner connectors under no_grad on some Learners: training still steps."""
+    t = trainer()
+    before = params(t.state.disc)
+    with torch.no_grad():
+        t.step(episodes(0), minibatch_size=16)
+    assert any(not torch.equal(a, b) for a, b in zip(before, params(t.state.disc), strict=True))

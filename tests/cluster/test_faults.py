@@ -30,6 +30,7 @@ from ray import tune
 from ray.rllib.utils.numpy import convert_to_numpy
 
 from rllib_asor.algorithms.common.faults import FaultCounter, make_faulty_env, with_fault_tolerance
+from rllib_asor.rllib.modules import TRAINER_STATE
 from tests.cluster.helpers import LAVA, RESTART_DEADLINE_S, assert_asor_metrics, lava_ppo_asor
 
 
@@ -133,16 +134,21 @@ def _checkpoints(trial: Path) -> list[Path]:
 def _learner_state(ckpt: Path) -> dict:
     """Module states of the ASOR modules and the Learner's own state (optimizers, seq no)."""
     out = {}
-    for mid in ("asor_disc.default_policy", "asor_proxy.default_policy", "default_policy"):
+    for mid in ("asor_disc.default_policy", "default_policy"):
         with open(ckpt / MODULES / mid / "module_state.pkl", "rb") as f:
             out[mid] = pickle.load(f)
+    out["asor"] = out.pop("asor_disc.default_policy")[TRAINER_STATE]
     with open(ckpt / "learner_group/learner/state.pkl", "rb") as f:
         out["learner"] = pickle.load(f)
     return out
 
 
 def _adam_step(state: dict, mid: str) -> float:
-    opt = state["learner"]["optimizer"][f"{mid}_default_optimizer"]["state"]["state"]
+    """Adam's step count of the policy's optimizer, or of one of ASOR's ("asor/disc_optimizer")."""
+    if mid.startswith("asor/"):
+        opt = state["asor"][mid.split("/")[1]]["state"]
+    else:
+        opt = state["learner"]["optimizer"][f"{mid}_default_optimizer"]["state"]["state"]
     return float(opt[0]["step"])
 
 
@@ -246,15 +252,15 @@ def test_resumed_learner_continues_checkpointed_asor_state(killed_and_resumed):
     nxt = _learner_state(resumed[0])
     j = nxt["learner"]["weights_seq_no"]  # its training iteration
     assert k < j <= STOP_ITER
-    proxy = "asor_proxy.default_policy"
-    count_k = float(saved[proxy]["rnd.obs_rms.count"])
-    count_j = float(nxt[proxy]["rnd.obs_rms.count"])
+    proxy_k, proxy_j = saved["asor"]["modules"], nxt["asor"]["modules"]
+    count_k = float(proxy_k["proxy.rnd.obs_rms.count"])
+    count_j = float(proxy_j["proxy.rnd.obs_rms.count"])
     assert count_j == pytest.approx(count_k * j / k, rel=0.01), (k, j, count_k, count_j)
-    for mid in ("asor_disc.default_policy", proxy, "default_policy"):
+    for mid in ("asor/disc_optimizer", "asor/proxy_optimizer", "default_policy"):
         assert _adam_step(nxt, mid) == pytest.approx(_adam_step(saved, mid) * j / k), mid
-    for key, value in saved[proxy].items():
-        if key.startswith("rnd.target."):
-            np.testing.assert_array_equal(np.asarray(nxt[proxy][key]), np.asarray(value), key)
+    for key, value in proxy_k.items():
+        if key.startswith("proxy.rnd.target."):
+            np.testing.assert_array_equal(np.asarray(proxy_j[key]), np.asarray(value), key)
 
 
 # ---------------------------------------------------------------------------- bad checkpoints

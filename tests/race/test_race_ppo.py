@@ -69,15 +69,10 @@ def test_single_racer_ppo_asor_iteration_reports_asor_and_race_metrics(ray_sessi
     algo = config.build_algo()
     try:
         module = algo.learner_group._learner.module
-        assert set(module.keys()) == {
-            "default_policy",
-            "asor_disc.default_policy",
-            "asor_proxy.default_policy",
-        }
+        assert set(module.keys()) == {"default_policy", "asor_disc.default_policy"}
         assert type(module["default_policy"]).__name__ == "RaceNetModule"
         # The discriminator and RND see agent (32) + destination (9).
         assert module["asor_disc.default_policy"].feature_dim == 32 + 9
-        assert module["asor_proxy.default_policy"].feature_dim == 32 + 9
         check_result(algo.train(), "default_policy")
     finally:
         algo.stop()
@@ -91,11 +86,7 @@ def test_two_racers_share_one_policy_and_report_asor_and_race_metrics(ray_sessio
         module = algo.learner_group._learner.module
         # A grid key works too: agent (32) + destination (9) + goals (3·16·16).
         assert module[f"asor_disc.{SHARED_POLICY}"].feature_dim == 32 + 9 + 768
-        assert set(module.keys()) == {
-            SHARED_POLICY,
-            f"asor_disc.{SHARED_POLICY}",
-            f"asor_proxy.{SHARED_POLICY}",
-        }
+        assert set(module.keys()) == {SHARED_POLICY, f"asor_disc.{SHARED_POLICY}"}
         result = algo.train()
         check_result(result, SHARED_POLICY)
         # Both racers' steps were sampled for the one shared module.

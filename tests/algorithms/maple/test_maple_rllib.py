@@ -15,6 +15,7 @@ from ray.rllib.core.columns import Columns
 import rllib_asor
 from rllib_asor.algorithms.maple import learner as maple_learner
 from rllib_asor.algorithms.maple.settings import MapleSettings
+from rllib_asor.rllib.modules import TRAINER_STATE
 
 ENV = "rllib_asor/HopperShift-v0"
 TINY = dict(
@@ -122,10 +123,14 @@ def test_checkpoint_round_trip_restores_ensemble_networks_discriminator_and_stat
         again = restored.learner_group._learner.module.get_state()
         disc = "asor_disc." + DEFAULT_MODULE_ID
         assert set(again) == set(state) and disc in state
-        for mid in state:
-            for k, v in state[mid].items():
+        flat = {mid: dict(s) for mid, s in state.items()}
+        flat[disc] = state[disc][TRAINER_STATE]["modules"]
+        flat_again = {mid: dict(s) for mid, s in again.items()}
+        flat_again[disc] = again[disc][TRAINER_STATE]["modules"]
+        for mid in flat:
+            for k, v in flat[mid].items():
                 np.testing.assert_allclose(
-                    np.asarray(again[mid][k]), np.asarray(v), err_msg=f"{mid}/{k}"
+                    np.asarray(flat_again[mid][k]), np.asarray(v), err_msg=f"{mid}/{k}"
                 )
         keys = set(state[DEFAULT_MODULE_ID])
         assert {"ensemble.elite_idx", "ensemble.obs_mean", "obs_lo", "reward_range"} <= keys
@@ -134,7 +139,7 @@ def test_checkpoint_round_trip_restores_ensemble_networks_discriminator_and_stat
             "nets.target_q2.body.0.weight",
             "nets.policy_gru.gru.weight_ih_l0",
         } <= keys
-        assert any("reward_rms" in k for k in state[disc])  # ASOR's normalisers
+        assert any("reward_rms" in k for k in flat[disc])  # ASOR's normalisers
         restored.train()  # and training goes on
     finally:
         restored.stop()
