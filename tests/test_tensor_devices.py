@@ -53,6 +53,8 @@ ALLOWED: dict[tuple[str, str, str], str] = {
         "CPU numpy bridge for scipy's lfilter; the caller moves it with .to(archive buffer)",
     ("algorithms/common/learner_speed.py", "IndexSelectShuffleBatch.shuffle", "from_numpy"):
         "one CPU permutation for numpy and torch columns; take_rows moves it per column",
+    ("asor/trainer.py", "_to_tensors", "from_numpy"):
+        "optimiser moments restored from numpy; Optimizer.load_state_dict moves them to the params",
 }
 
 
