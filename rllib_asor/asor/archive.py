@@ -28,6 +28,7 @@ class _OpenEpisode:
     rewards: list[torch.Tensor] = field(default_factory=list)
     dynamics_id: int = 0
     seen_in_call: int = 0
+    terminated: bool = False
 
 
 class StateArchive(nn.Module):
@@ -55,30 +56,31 @@ class StateArchive(nn.Module):
         terminated: bool,
         gamma: float,
     ) -> None:
-        """Append one chunk of an episode; a terminated episode is archived at once."""
+        """Append one chunk of an episode; a terminated episode is archived at the call's
+        `end_call` (with the others of that call: one sort per bucket, not one per episode)."""
         ep = self._open.setdefault(key, _OpenEpisode(dynamics_id=int(dynamics_id)))
         ep.features.append(features.detach().float().cpu())
         ep.rewards.append(rewards.detach().float().cpu())
         ep.seen_in_call = self._calls
-        if terminated:
-            self._close(key, gamma)
+        ep.terminated = ep.terminated or terminated
 
     def end_call(self, gamma: float) -> None:
-        """Archive the open episodes that received no chunk since the last `end_call`
-        (the env truncated them); call once per batch, after all `add_chunk`s."""
-        for key in [k for k, ep in self._open.items() if ep.seen_in_call < self._calls]:
-            self._close(key, gamma)
+        """Archive the episodes that terminated in this call and the open ones that received no
+        chunk since the last `end_call` (the env truncated them); call once per batch, after
+        all `add_chunk`s."""
+        closing = [
+            k for k, ep in self._open.items() if ep.terminated or ep.seen_in_call < self._calls
+        ]
+        episodes = []
+        for key in closing:
+            ep = self._open.pop(key)
+            feats, rewards = torch.cat(ep.features), torch.cat(ep.rewards)
+            if len(rewards):
+                rtg = discounted_return_to_go(rewards, gamma)
+                episodes.append((feats, rtg, float(rewards.sum()), ep.dynamics_id))
+        self.insert_many(episodes)
         self._calls += 1
 
-    def _close(self, key: Hashable, gamma: float) -> None:
-        ep = self._open.pop(key)
-        feats, rewards = torch.cat(ep.features), torch.cat(ep.rewards)
-        if len(rewards) == 0:
-            return
-        rtg = discounted_return_to_go(rewards, gamma)
-        self.insert(feats, rtg, float(rewards.sum()), ep.dynamics_id)
-
-    @torch.no_grad()
     def insert(
         self,
         features: torch.Tensor,
@@ -87,26 +89,40 @@ class StateArchive(nn.Module):
         dynamics_id: int,
     ) -> None:
         """Insert one whole episode; keep the bucket's `capacity` best states."""
-        b = int(dynamics_id) % self.buckets
-        n = int(self.size[b])
-        self.episodes_added += 1
-        new = (len(features),)
-        feats = torch.cat([self.features[b, :n], features.to(self.features)])
-        rets = torch.cat(
-            [self.returns[b, :n], torch.full(new, float(episode_return), device=self.returns.device)]
-        )
-        rtg = torch.cat([self.return_to_go[b, :n], return_to_go.to(self.return_to_go)])
-        stamp = torch.cat(
-            [self.stamp[b, :n], torch.full(new, float(self.episodes_added), device=self.stamp.device)]
-        )
-        # Highest episode return first; among equal returns the newest first.
-        order = torch.argsort(stamp, descending=True, stable=True)
-        order = order[torch.argsort(rets[order], descending=True, stable=True)][: self.capacity]
-        k = len(order)
-        self.features[b, :k], self.returns[b, :k] = feats[order], rets[order]
-        self.return_to_go[b, :k], self.stamp[b, :k] = rtg[order], stamp[order]
-        self.returns[b, k:] = -torch.inf
-        self.size[b] = k
+        self.insert_many([(features, return_to_go, episode_return, dynamics_id)])
+
+    @torch.no_grad()
+    def insert_many(
+        self, episodes: list[tuple[torch.Tensor, torch.Tensor, float, int]]
+    ) -> None:
+        """Insert whole episodes (features, return-to-go, episode return, dynamics id), stamped
+        in list order; each bucket keeps its `capacity` best states: highest episode return
+        first, among equal returns the newest first (what inserting them one by one keeps)."""
+        by_bucket: dict[int, list[tuple[torch.Tensor, torch.Tensor, float, float]]] = {}
+        for features, return_to_go, episode_return, dynamics_id in episodes:
+            self.episodes_added += 1
+            by_bucket.setdefault(int(dynamics_id) % self.buckets, []).append(
+                (features, return_to_go, float(episode_return), float(self.episodes_added))
+            )
+        for b, new in by_bucket.items():
+            n = int(self.size[b])
+            feats = torch.cat([self.features[b, :n], *(f.to(self.features) for f, *_ in new)])
+            rtg = torch.cat([self.return_to_go[b, :n], *(g.to(self.return_to_go) for _, g, *_ in new)])
+            rets = torch.cat(
+                [self.returns[b, :n]]
+                + [torch.full((len(f),), r, device=self.returns.device) for f, _, r, _ in new]
+            )
+            stamp = torch.cat(
+                [self.stamp[b, :n]]
+                + [torch.full((len(f),), t, device=self.stamp.device) for f, _, _, t in new]
+            )
+            order = torch.argsort(stamp, descending=True, stable=True)
+            order = order[torch.argsort(rets[order], descending=True, stable=True)][: self.capacity]
+            k = len(order)
+            self.features[b, :k], self.returns[b, :k] = feats[order], rets[order]
+            self.return_to_go[b, :k], self.stamp[b, :k] = rtg[order], stamp[order]
+            self.returns[b, k:] = -torch.inf
+            self.size[b] = k
 
     # ------------------------------------------------------------------ reading
     def __len__(self) -> int:

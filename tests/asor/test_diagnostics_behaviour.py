@@ -301,4 +301,5 @@ def test_the_archive_has_the_configured_number_of_dynamics_buckets():
     archive = update.AsorState(cfg, 1).archive
     for key, dynamics in (("a", 0), ("b", 2), ("c", 1)):  # 0 and 2 share a bucket of one slot
         archive.add_chunk(key, torch.ones(1, 1), torch.ones(1), dynamics, terminated=True, gamma=0.9)
+    archive.end_call(0.9)
     assert len(archive) == 2

@@ -121,12 +121,34 @@ def test_archive_joins_chunks_and_closes_episodes_that_stop_arriving():
     arch.end_call(0.5)
     assert len(arch) == 0 and arch.open_episodes == 1
     arch.add_chunk("a", torch.zeros(1, 1), torch.tensor([2.0]), 0, terminated=True, gamma=0.5)
-    assert len(arch) == 3 and arch.returns[0, 0] == 3.0
+    assert len(arch) == 0  # archived with the call's other episodes, at its end
+    arch.end_call(0.5)
+    assert len(arch) == 3 and arch.returns[0, 0] == 3.0 and arch.open_episodes == 0
     assert sorted(arch.return_to_go[0, :3].tolist()) == [1.0, 2.0, 2.0]
     arch.add_chunk("b", torch.zeros(1, 1), torch.tensor([1.0]), 0, terminated=False, gamma=0.5)
     arch.end_call(0.5)
+    assert len(arch) == 3 and arch.open_episodes == 1
     arch.end_call(0.5)  # "b" got no chunk in this call: the env truncated it
     assert len(arch) == 4 and arch.open_episodes == 0
+
+
+def test_inserting_a_calls_episodes_together_keeps_what_one_by_one_keeps():
+    g = torch.Generator().manual_seed(0)
+    episodes = [
+        (torch.randn(int(n), 2, generator=g), torch.randn(int(n), generator=g), float(r), int(d))
+        for n, r, d in zip(torch.randint(1, 6, (30,), generator=g),
+                           torch.randint(0, 4, (30,), generator=g), torch.arange(30) % 3,
+                           strict=True)
+    ]  # fmt: skip
+    one, many = (StateArchive(feature_dim=2, capacity=7, buckets=2) for _ in range(2))
+    for ep in episodes[:10]:  # some states already there, as after earlier calls
+        one.insert(*ep)
+        many.insert(*ep)
+    for ep in episodes[10:]:
+        one.insert(*ep)
+    many.insert_many(episodes[10:])
+    for (name, a), b in zip(one.state_dict().items(), many.state_dict().values(), strict=True):
+        assert torch.equal(a, b), name
 
 
 def test_archive_survives_a_state_dict_round_trip():
