@@ -44,16 +44,53 @@ class Discriminator(nn.Module):
     ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """grad_penalty·E‖∇ logit(s)‖² on real samples (w.r.t. the normalised input; AMP/ASE)
         plus logit_reg·‖W_out‖² (ASE's logit regularisation)."""
-        zero = torch.zeros((), device=real.device)
-        gp = zero
+        gp = torch.zeros((), device=real.device)
         if grad_penalty > 0 and real.shape[0] > 0:
             z = self.normalize(real).detach().requires_grad_(True)
-            (grad,) = torch.autograd.grad(self.net(z).sum(), z, create_graph=True)
-            gp = grad.pow(2).sum(-1).mean()
+            gp = _input_grad_norm(self.net(z).sum(), z)
+        return self._regularised(gp, grad_penalty, logit_reg)
+
+    def training_loss(
+        self,
+        x: torch.Tensor,
+        labels: torch.Tensor,
+        label_smoothing: float,
+        grad_penalty: float,
+        logit_reg: float,
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """`discriminator_loss` plus `regularizer` on raw features x in one forward pass: the
+        gradient penalty is taken on that pass's real rows (each row's logit depends on its own
+        input only, so it is the penalty a second pass over them gives)."""
+        real = labels > 0.5
+        z = self.normalize(x).detach()
+        penalise = grad_penalty > 0 and bool(real.any())
+        if penalise:
+            z.requires_grad_(True)
+        logits = self.net(z).squeeze(-1)
+        loss, stats = discriminator_loss(logits, labels, label_smoothing)
+        gp = torch.zeros((), device=x.device)
+        if penalise:
+            gp = _input_grad_norm(logits[real].sum(), z, rows=real)
+        reg, reg_stats = self._regularised(gp, grad_penalty, logit_reg)
+        return loss + reg, {**stats, **reg_stats}
+
+    def _regularised(
+        self, gp: torch.Tensor, grad_penalty: float, logit_reg: float
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         out_w = self.net[-1].weight
-        lr = out_w.pow(2).sum() if logit_reg > 0 else zero
+        lr = out_w.pow(2).sum() if logit_reg > 0 else torch.zeros((), device=out_w.device)
         loss = grad_penalty * gp + logit_reg * lr
         return loss, {"disc_grad_penalty": gp.detach(), "disc_logit_norm": out_w.detach().norm()}
+
+
+def _input_grad_norm(
+    out: torch.Tensor, z: torch.Tensor, rows: torch.Tensor | None = None
+) -> torch.Tensor:
+    """E‖∂out/∂z‖² over z's rows (or the `rows` mask of them), differentiable."""
+    (grad,) = torch.autograd.grad(out, z, create_graph=True)
+    if rows is not None:
+        grad = grad[rows]
+    return grad.pow(2).sum(-1).mean()
 
 
 def discriminator_loss(

@@ -29,7 +29,6 @@ import torch.distributed as dist
 from torch import nn
 
 from rllib_asor.asor.config import AsorConfig
-from rllib_asor.asor.discriminator import discriminator_loss
 from rllib_asor.asor.proxy import ProxyInputs, make_proxy
 from rllib_asor.asor.update import AsorBatch, AsorResult, AsorState, asor_update
 
@@ -133,11 +132,12 @@ class AsorTrainer(nn.Module):
         sums: dict[str, float] = {}
         steps = 0
         for idx in self._minibatches(features.shape[0], minibatch_size, rows):
-            x, y = features[idx], labels[idx]
-            loss, stats = discriminator_loss(disc(x), y, cfg.label_smoothing)
-            reg, reg_stats = disc.regularizer(x[y > 0.5], cfg.disc_grad_penalty, cfg.disc_logit_reg)
-            self._optimise(self.disc_optimizer, loss + reg, average)
-            for k, v in {**stats, **reg_stats}.items():
+            loss, stats = disc.training_loss(
+                features[idx], labels[idx], cfg.label_smoothing,
+                cfg.disc_grad_penalty, cfg.disc_logit_reg,
+            )  # fmt: skip
+            self._optimise(self.disc_optimizer, loss, average)
+            for k, v in stats.items():
                 sums[k] = sums.get(k, 0.0) + float(v)
             steps += 1
         return {k: v / steps for k, v in sums.items()} if steps else {}

@@ -146,3 +146,23 @@ def test_the_networks_train_when_called_under_no_grad():
     with torch.no_grad():
         t.step(episodes(0), minibatch_size=16)
     assert any(not torch.equal(a, b) for a, b in zip(before, params(t.state.disc), strict=True))
+
+
+@pytest.mark.parametrize("penalty", [0.0, 2.0])
+def test_the_one_pass_training_loss_is_the_gan_loss_plus_the_regulariser_and_its_gradient(penalty):
+    """`Discriminator.training_loss` takes the gradient penalty on its own pass's real rows:
+    the same loss and parameter gradients as a second pass over them."""
+    disc = trainer(disc_input_norm=True).state.disc
+    disc.observe(torch.randn(50, DIM) * 3 + 1)
+    x, y = torch.randn(12, DIM), (torch.arange(12) % 3 == 0).float()
+    one, stats = disc.training_loss(x, y, 0.1, penalty, 0.05)
+    gan, _ = discriminator_loss(disc(x), y, 0.1)
+    reg, reg_stats = disc.regularizer(x[y > 0.5], penalty, 0.05)
+    torch.testing.assert_close(one, gan + reg)
+    assert stats["disc_grad_penalty"] == pytest.approx(float(reg_stats["disc_grad_penalty"]))
+    g_one = torch.autograd.grad(one, list(disc.parameters()))
+    g_two = torch.autograd.grad(gan + reg, list(disc.parameters()))
+    for a, b in zip(g_one, g_two, strict=True):
+        torch.testing.assert_close(a, b)
+    if penalty:
+        assert stats["disc_grad_penalty"] > 0
