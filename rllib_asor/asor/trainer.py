@@ -30,7 +30,13 @@ from torch import nn
 
 from rllib_asor.asor.config import AsorConfig
 from rllib_asor.asor.proxy import ProxyInputs, make_proxy
-from rllib_asor.asor.update import AsorBatch, AsorResult, AsorState, asor_update
+from rllib_asor.asor.update import (
+    AsorBatch,
+    AsorResult,
+    AsorState,
+    asor_update,
+    ranked_proxy_inputs,
+)
 
 STATE_FORMAT = 2
 """Version of `get_state()`'s layout; a state without it (or with another) is refused."""
@@ -95,7 +101,7 @@ class AsorTrainer(nn.Module):
         rows: float | None = None,
         share: tuple[int, int] = (0, 1),
     ) -> None:
-        """Train the discriminator on `result`'s D_P vs D_Q and the proxy on `batch`'s states;
+        """Train the discriminator on `result`'s D_P vs D_Q and the proxy on the ranked states;
         their metrics join `result.metrics` (means over the minibatches).
 
         `minibatch_size`: rows per optimiser step (None: the whole aux batch at once).
@@ -103,7 +109,7 @@ class AsorTrainer(nn.Module):
         when unset). `share`: (rank, world size) when several Learners call this with the
         same whole batch (module docstring)."""
         rank, size = share
-        proxy_in = batch.proxy_inputs or ProxyInputs(batch.features)
+        proxy_in = result.proxy_inputs or ranked_proxy_inputs(batch)
         disc_feats, labels = result.disc_features, result.disc_labels
         if size > 1:
             disc_feats, labels = even_share(disc_feats, rank, size), even_share(labels, rank, size)

@@ -98,6 +98,18 @@ class AsorBatch:
     """[N] V(s′) (the critic's explained variance for the warm-up; on-policy only)."""
     chunks: Sequence[Chunk] | None = None
     """Episode chunks in row order (the archive and the warm-up; on-policy only)."""
+    ranked: torch.Tensor | None = None
+    """Indices of the rows that are ranked (proxy counts, D_P, the discriminator's D_Q) when
+    not all are; `values` and `proxy_inputs` then hold those rows only. Every row gets the
+    bonus. Set where the discriminator trains on fewer rows than the batch holds (SAC's fast
+    path: one minibatch of a call's 16), so V(s) and the counts of the others are not needed."""
+
+
+def ranked_proxy_inputs(batch: AsorBatch) -> ProxyInputs:
+    """What the proxy observes, counts and trains on: the ranked rows' inputs."""
+    if batch.proxy_inputs is not None:
+        return batch.proxy_inputs
+    return ProxyInputs(batch.features if batch.ranked is None else batch.features[batch.ranked])
 
 
 def concat_batches(batches: Sequence[AsorBatch]) -> AsorBatch:
@@ -116,8 +128,12 @@ def concat_batches(batches: Sequence[AsorBatch]) -> AsorBatch:
         return None if any(p is None for p in parts) else torch.cat(parts)
 
     chunks: list[Chunk] | None = []
+    ranked: list[torch.Tensor] | None = [] if any(b.ranked is not None for b in batches) else None
     offset = 0
     for b in batches:
+        if ranked is not None:
+            rows = b.ranked if b.ranked is not None else torch.arange(b.features.shape[0])
+            ranked.append(rows.to(b.features.device) + offset)
         if b.chunks is None or chunks is None:
             chunks = None
         else:
@@ -144,6 +160,7 @@ def concat_batches(batches: Sequence[AsorBatch]) -> AsorBatch:
         terminateds=cat(lambda b: b.terminateds),
         next_values=cat(lambda b: b.next_values),
         chunks=chunks,
+        ranked=None if ranked is None else torch.cat(ranked),
     )
 
 
@@ -160,6 +177,8 @@ class AsorResult:
     metrics: dict[str, float] = field(default_factory=dict)
     lam: float = 0.0
     """λ as applied: scaled, 0 when inactive, capped (what multiplies the bonus)."""
+    proxy_inputs: ProxyInputs | None = None
+    """What the proxy observed and counted (its train batch); None without a proxy."""
 
 
 @torch.no_grad()
@@ -172,11 +191,14 @@ def asor_update(
 ) -> AsorResult:
     """Steps 1-7 of the module docstring for one policy's batch."""
     feats, n = batch.features, batch.features.shape[0]
+    # The ranked rows (all, unless `batch.ranked` names fewer): they form D_Q.
+    rank_feats = feats if batch.ranked is None else feats[batch.ranked]
+    r = rank_feats.shape[0]
     # 1. V(s): `batch.values`, from the algorithm's critic.
     # 2. The visitation proxy observes the batch, then counts it.
-    counts = None
+    counts, proxy_in = None, None
     if proxy is not None:
-        proxy_in = batch.proxy_inputs or ProxyInputs(feats)
+        proxy_in = ranked_proxy_inputs(batch)
         proxy.observe(proxy_in)
         counts = proxy.count(proxy_in)
     # 3. The real set D_P, and the discriminator's train batch.
@@ -184,7 +206,7 @@ def asor_update(
     from_archive = state.archive is not None and batch.chunks is not None
     if from_archive:
         _archive_episodes(state.archive, batch)
-        cand, cand_rtg = state.archive.sample(n, _torch_generator(rng))
+        cand, cand_rtg = state.archive.sample(r, _torch_generator(rng))
         cand_counts = None
         if proxy is not None and cfg.proxy != "ensemble" and len(cand):
             cand_counts = proxy.count(ProxyInputs(cand))
@@ -196,18 +218,18 @@ def asor_update(
         )
         # Shuffled: the Learner cuts this batch into minibatches in row order.
         k, device = int(real.sum()), feats.device
-        order = torch.from_numpy(rng.permutation(k + n)).to(device)
-        disc_feats = torch.cat([cand[real].to(feats), feats])[order]
+        order = torch.from_numpy(rng.permutation(k + r)).to(device)
+        disc_feats = torch.cat([cand[real].to(feats), rank_feats])[order]
         labels = torch.cat(
             [torch.ones(k, dtype=feats.dtype, device=device),
-             torch.zeros(n, dtype=feats.dtype, device=device)]
+             torch.zeros(r, dtype=feats.dtype, device=device)]
         )[order]
-        batch_real = torch.zeros(n, dtype=torch.bool, device=device)
+        batch_real = torch.zeros(r, dtype=torch.bool, device=device)
     else:
         # The paper (and off-policy/offline, whose replay batch already spans every
         # dynamics seen): D_P is the top of the current batch.
         batch_real = partition(batch.values, counts, rho_value, rho_count, mode=cfg.mode, rng=rng)
-        disc_feats, labels = feats, batch_real.float()
+        disc_feats, labels = rank_feats, batch_real.float()
     has_real = bool((labels > 0.5).any())
     potential = cfg.shaping == "potential"
     if potential and (batch.next_features is None or batch.terminateds is None):
@@ -226,6 +248,7 @@ def asor_update(
     parts += [extra] if extra is not None else []
     out = state.disc(torch.cat(parts)) if len(parts) > 1 else state.disc(feats)
     logits = out[:n]
+    rank_logits = logits if batch.ranked is None else logits[batch.ranked]
 
     # 5. The bonus b(s) (with potential shaping, b is the potential Φ).
     raw = _raw_bonus(cfg, logits)
@@ -238,10 +261,10 @@ def asor_update(
     js = float("nan")
     if auto:
         if extra is None:  # D_P is the batch's top: its own rows and labels
-            js_logits, js_labels = logits, labels
+            js_logits, js_labels = rank_logits, labels
         else:  # D_P from the archive, D_Q the batch
-            js_logits = torch.cat([out[out.shape[0] - extra.shape[0] :], logits])
-            js_labels = torch.cat([labels.new_ones(extra.shape[0]), labels.new_zeros(n)])
+            js_logits = torch.cat([out[out.shape[0] - extra.shape[0] :], rank_logits])
+            js_labels = torch.cat([labels.new_ones(extra.shape[0]), labels.new_zeros(r)])
         _, disc_stats = discriminator_loss(js_logits, js_labels)
         js = disc_stats["js_estimate"].item()
     lam = _lambda(cfg, state, js, batch.timestep)
@@ -261,7 +284,7 @@ def asor_update(
     delta = (lam_eff * bonus).to(batch.env_rewards.dtype)
     if not torch.isfinite(delta).all():
         raise ValueError("ASOR: the reward bonus is NaN/inf")
-    metrics = _metrics(state, lam_eff, scale, bonus, delta, logits, batch, batch_real, labels)
+    metrics = _metrics(state, lam_eff, scale, bonus, delta, rank_logits, batch, batch_real, labels)
     if metrics:
         metrics.update(
             {
@@ -277,7 +300,7 @@ def asor_update(
         )
         if ev is not None:  # no episode chunks (off-policy, offline): absent, never NaN
             metrics["critic_ev"] = ev
-    return AsorResult(delta, disc_feats, labels, metrics, lam_eff)
+    return AsorResult(delta, disc_feats, labels, metrics, lam_eff, proxy_in)
 
 
 @torch.no_grad()
@@ -341,7 +364,12 @@ def _lambda(cfg: AsorConfig, state: AsorState, js_estimate: float, timestep: flo
 def _critic_ev(batch: AsorBatch) -> float | None:
     """Explained variance of V(s) against the chunks' discounted returns (bootstrapped with
     V at each chunk's end); None without chunk structure."""
-    if batch.chunks is None or batch.next_values is None or batch.terminateds is None:
+    if (
+        batch.chunks is None
+        or batch.next_values is None
+        or batch.terminateds is None
+        or batch.ranked is not None
+    ):
         return None
     r = batch.env_rewards.double().tolist()
     nv = batch.next_values.double().tolist()

@@ -33,6 +33,7 @@ import dataclasses
 from collections.abc import Callable, Iterator
 from typing import Any
 
+import numpy as np
 import torch
 import torch.distributed as dist
 import tree
@@ -190,7 +191,9 @@ class AsorRewardConnector(ConnectorV2):
         next), else None."""
         trainer = rl_module[module_id].unwrapped().trainer
         built = (
-            self._asor_batch(rl_module, batch, policy_id, episodes, timestep)
+            self._asor_batch(
+                rl_module, batch, policy_id, episodes, timestep, aux_rows, trainer.shuffle_rng
+            )
             if policy_id in batch
             else None
         )
@@ -228,10 +231,20 @@ class AsorRewardConnector(ConnectorV2):
         return built[2]
 
     def _asor_batch(
-        self, rl_module: Any, batch: dict, policy_id: str, episodes: Any, timestep: float
+        self,
+        rl_module: Any,
+        batch: dict,
+        policy_id: str,
+        episodes: Any,
+        timestep: float,
+        rank_rows: float | None = None,
+        rng: np.random.Generator | None = None,
     ) -> tuple[AsorBatch, torch.Tensor, torch.Tensor]:
         """(`AsorBatch` of the policy's valid ranked rows, those rows' indices, the critic's
-        raw values of every ranked row)."""
+        raw values of every ranked row). `rank_rows` (with `rng`): where the discriminator
+        trains on fewer rows than a flat off-policy batch holds, only that many rows, drawn
+        at random, are ranked (their V(s) and counts; `AsorBatch.ranked`); every row still
+        gets the bonus."""
         cfg = self.asor
         policy = rl_module[policy_id].unwrapped()
         ranked = self.adapter.ranked_columns
@@ -265,8 +278,12 @@ class AsorRewardConnector(ConnectorV2):
                 f"ASOR: {bad} reward(s) of policy {policy_id!r} are NaN/inf; the reward "
                 "augmentation needs finite rewards (check the env)"
             )
+        subset = _rank_subset(batch[policy_id], n, mask, ranked, rank_rows, rng)
         with torch.no_grad():
-            raw_values = self.adapter.state_values(policy, batch[policy_id])
+            source = batch[policy_id]
+            if subset is not None:
+                source = {k: v[subset] for k, v in source.items()}
+            raw_values = self.adapter.state_values(policy, source)
         all_values = raw_values.reshape(-1).float()
         terminateds = pb.get(Columns.TERMINATEDS)
         terminateds = None if terminateds is None else flat(terminateds).bool()
@@ -281,14 +298,20 @@ class AsorRewardConnector(ConnectorV2):
         if cfg.needs_proxy and cfg.proxy == "rnd_per_dynamics":
             proxy_in.dynamics_ids = flat(pb[DYNAMICS_ID])[rows].long()
 
+        if subset is not None:  # rows == every row here: the subset indexes them directly
+            proxy_in = ProxyInputs(
+                *(None if (v := getattr(proxy_in, f.name)) is None else v[subset]
+                  for f in dataclasses.fields(ProxyInputs))
+            )  # fmt: skip
         asor_batch = AsorBatch(
             features=features,
             env_rewards=env_rewards,
-            values=all_values[rows],
+            values=all_values if subset is not None else all_values[rows],
             gamma=self.gamma,
             timestep=timestep,
             proxy_inputs=proxy_in,
             terminateds=None if terminateds is None else terminateds[rows],
+            ranked=subset,
         )
         if mask is not None and len(lead) == 1:
             # On-policy (PPO's pipeline adds the loss mask): each chunk ends with a bootstrap
@@ -329,6 +352,27 @@ class AsorRewardConnector(ConnectorV2):
         if row != valid.numel() or start != int(valid.sum()):
             return None
         return chunks
+
+
+def _rank_subset(
+    pb: Any,
+    n: int,
+    mask: Any,
+    ranked_columns: Any,
+    rank_rows: float | None,
+    rng: np.random.Generator | None,
+) -> torch.Tensor | None:
+    """Sorted indices of `rank_rows` rows drawn from a flat batch of n transitions (every
+    column [n, ...] tensors, no loss mask, the policy's own rows), or None: rank them all."""
+    if rank_rows is None or rng is None or mask is not None or ranked_columns is not None:
+        return None
+    k = int(rank_rows)
+    if not 0 < k < n or not isinstance(pb, dict):
+        return None
+    if not all(isinstance(v, torch.Tensor) and v.shape[:1] == (n,) for v in pb.values()):
+        return None
+    device = next(iter(pb.values())).device
+    return torch.from_numpy(np.sort(rng.choice(n, size=k, replace=False))).to(device)
 
 
 def bonus_on_rows(

@@ -206,7 +206,7 @@ def test_potential_shaping_uses_the_configs_gamma_and_the_critics_values(algo, m
     real_update = trainer_module.asor_update
 
     def update_spy(cfg, state, proxy, batch, rng):
-        ranked.append(batch.values.clone())
+        ranked.append((batch.values.clone(), batch.ranked))
         return real_update(cfg, state, proxy, batch, rng)
 
     monkeypatch.setattr(trainer_module, "asor_update", update_spy)
@@ -225,7 +225,8 @@ def test_potential_shaping_uses_the_configs_gamma_and_the_critics_values(algo, m
         next_bonus = reward_bonus(disc_before(b[Columns.NEXT_OBS]), "log", -5.0)
     env = torch.tensor([env_reward[tuple(o)] for o in b[Columns.OBS].numpy()])
     torch.testing.assert_close(b[Columns.REWARDS], env + 0.5 * (0.5 * next_bonus - bonus))
-    torch.testing.assert_close(ranked[0], expected_values)
+    values, rows = ranked[0]  # the fast path ranks one minibatch of the call's rows
+    torch.testing.assert_close(values, expected_values if rows is None else expected_values[rows])
 
 
 def rows_trained(monkeypatch) -> dict[str, int]:
@@ -622,3 +623,35 @@ def test_maple_srpo_mode_trains_without_a_proxy():
     disc = params(asor_trainer(learner).state)
     results = learner.update(batch=maple_batch(learner)[1], timesteps={"maple_gradient_steps": 0})
     assert changed(disc, asor_trainer(learner).state) and "rnd_loss" not in results[DISC]
+
+
+def test_the_fast_path_ranks_one_minibatch_and_gives_every_row_the_bonus(monkeypatch):
+    """The discriminator trains on one minibatch per call, so only that many rows are ranked
+    (V(s), counts, D_P); the bonus goes to every row of the call."""
+    from rllib_asor.algorithms.sac.asor_adapter import SACAsorAdapter
+
+    learner = sac_learner(preset="paper", lambda_=0.5)
+    valued, ranked = [], []
+    real_values, real_update = SACAsorAdapter.state_values, trainer_module.asor_update
+
+    def values_spy(self, module, batch):
+        valued.append(len(batch[Columns.OBS]))
+        return real_values(self, module, batch)
+
+    def update_spy(cfg, state, proxy, batch, rng):
+        ranked.append(batch)
+        return real_update(cfg, state, proxy, batch, rng)
+
+    monkeypatch.setattr(SACAsorAdapter, "state_values", values_spy)
+    monkeypatch.setattr(trainer_module, "asor_update", update_spy)
+    seen = policy_batches_seen(monkeypatch, learner)
+    cols = transitions(96)
+    update(learner, cols)
+    assert valued == [32]  # one minibatch of the call's 3
+    (batch,) = ranked
+    assert batch.features.shape[0] == 96 and batch.values.shape == (32,)
+    assert batch.ranked.shape == (32,) and len(set(batch.ranked.tolist())) == 32
+    env_reward = {tuple(o): r for o, r in zip(cols[Columns.OBS], cols[Columns.REWARDS], strict=True)}
+    for b in seen:  # every row's reward moved (log ω < 0 in the paper's form)
+        env = torch.tensor([env_reward[tuple(o)] for o in b[Columns.OBS].numpy()])
+        assert (b[Columns.REWARDS] < env).all()
