@@ -227,9 +227,9 @@ class AsorTrainer(nn.Module):
         a state of another layout, e.g. from a checkpoint of an older rllib-asor."""
         if not isinstance(state, dict) or state.get("format") != STATE_FORMAT:
             raise ValueError(
-                "this ASOR state was written by an older rllib-asor (ASOR's networks were "
-                "RLlib modules trained in the policy's minibatch loop) and cannot be restored; "
-                "allowed: a checkpoint written by this version, or train from scratch"
+                "this ASOR state was written by an older rllib-asor (ASOR's discriminator and "
+                "proxy were separate RLlib modules then) and cannot be restored by this "
+                "version; allowed: a checkpoint written by this version, or train again"
             )
         device = self.state.auto_lambda.device
         self.load_state_dict({k: torch.as_tensor(v).to(device) for k, v in state["modules"].items()})

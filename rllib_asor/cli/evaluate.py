@@ -104,6 +104,10 @@ def _local_config(path: str, seed: int | None, evaluation_config: bool = False) 
             ctor = pickle.load(f)
         config = ctor["ctor_args_and_kwargs"][0][0]
     except Exception as e:
+        from rllib_asor.rllib.modules import OLDER_CHECKPOINT, RETIRED_CLASSES
+
+        if any(repr(name) in str(e) for name in RETIRED_CLASSES):
+            raise UsageError(OLDER_CHECKPOINT, source=path) from None
         raise UsageError(
             f"cannot read the algorithm config ({type(e).__name__}: {e})",
             source=os.path.join(path, CTOR_FILE),

@@ -19,6 +19,13 @@ from rllib_asor.asor.trainer import AsorTrainer
 
 TRAINER_STATE = "asor_trainer"
 """The module state's one key: `AsorTrainer.get_state()`."""
+RETIRED_CLASSES = ("AsorDiscriminatorModule", "AsorProxyModule")
+"""ASOR's module classes before `AsorModule`: a checkpoint that names one is older than it."""
+OLDER_CHECKPOINT = (
+    "written by an older rllib-asor (ASOR's discriminator and proxy were separate RLlib modules "
+    "then) and cannot be restored by this version; allowed: a checkpoint written by this "
+    "version, or train again"
+)
 
 
 class AsorModule(TorchRLModule):
