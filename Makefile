@@ -102,7 +102,7 @@ mutation: $(STAMP)
 # The compat and glue tests on another Ray release of the supported range (pyproject.toml,
 # rllib_asor/ray_compat.py): `make compat RAY=2.58.1`. Its own venv, .venv-ray-<release> (built
 # once, reused; `make clean` removes it), holds torch, that Ray and this tree (editable).
-RAY_RELEASES := 2.58.1 2.59.0 2.60.0
+RAY_RELEASES := 2.58.0 2.58.1 2.59.0 2.60.0
 COMPAT_TESTS := tests/rllib tests/algorithms/test_fast_sac.py tests/algorithms/escp \
                 tests/cli/test_e2e.py
 ifneq ($(filter compat,$(MAKECMDGOALS)),)

@@ -32,11 +32,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-RAY_TESTED = ("2.58.1", "2.59.0", "2.60.0")
+RAY_TESTED = ("2.58.0", "2.58.1", "2.59.0", "2.60.0")
 """The Ray releases this module is tested against, oldest first: every name below exists in
 each of them under the same owner (no lookup here depends on the version)."""
 
-RAY_REQUIREMENT = "ray[rllib,tune]>=2.58.1,<2.61"
+RAY_REQUIREMENT = "ray[rllib,tune]>=2.58,<2.61"
 """pyproject.toml's Ray requirement: of the releases there are, it admits exactly `RAY_TESTED`."""
 
 _CONFIG = "ray.rllib.algorithms.algorithm_config:AlgorithmConfig"
