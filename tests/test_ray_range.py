@@ -4,6 +4,7 @@ the README and docs/testing.md. No Ray is imported here (`make compat` checks th
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import tomllib
@@ -55,9 +56,11 @@ def test_the_docs_state_the_tested_range(doc):
 
 
 def make(*args: str) -> subprocess.CompletedProcess:
+    """`make -n ARGS` in the repository, free of the flags of a `make test` that runs us."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL")}
     return subprocess.run(
         ["make", "--no-print-directory", "-n", *args],
-        cwd=ROOT, capture_output=True, text=True, timeout=60, check=False,
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=60, check=False,
     )  # fmt: skip
 
 
