@@ -107,7 +107,7 @@ COMPAT_TESTS := tests/rllib tests/algorithms/test_fast_sac.py tests/algorithms/e
                 tests/cli/test_e2e.py
 ifneq ($(filter compat,$(MAKECMDGOALS)),)
 ifneq ($(filter-out $(RAY_RELEASES),$(RAY))$(words $(RAY)),1)
-$(error make compat: RAY='$(RAY)' is not a supported Ray release; allowed: RAY=$(subst $() ,|,$(RAY_RELEASES)))
+$(error make compat: RAY='$(RAY)' is not a tested Ray release; allowed: one of $(RAY_RELEASES), e.g. make compat RAY=$(lastword $(RAY_RELEASES)))
 endif
 endif
 .PHONY: compat
