@@ -11,20 +11,28 @@ export RAY_DISABLE_DOCKER_CPU_WARNING := 1
 export MUJOCO_GL ?= egl
 # This machine's pip config lists package indexes that do not exist here: pip warns once per
 # package ("Location ... is ignored"). Not ours to print; every other pip line is kept.
+comma := ,
 PIP_FILTER := 2>&1 | { grep -v "^WARNING: Location '.*' is ignored" || true; }
 
-.PHONY: install train smoke test lint bench clean docs
+.PHONY: install train smoke test lint bench clean docs compat
 
-$(STAMP): pyproject.toml
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip setuptools wheel $(PIP_FILTER)
+# $(call venv_install,VENV,EXTRAS,MORE): VENV (created if missing) gets pip, torch and this tree
+# installed editable with EXTRAS, plus the requirements MORE (in the same resolve).
+define venv_install
+	test -x $(1)/bin/python || $(PYTHON) -m venv $(1)
+	$(1)/bin/python -m pip install -q --upgrade pip setuptools wheel $(PIP_FILTER)
 	# torch pinned to the CPU build (a local wheel here); never an open `torch` requirement.
-	$(PY) -m pip install -q "torch==2.13.0" $(PIP_FILTER)
+	$(1)/bin/python -m pip install -q "torch==2.13.0" $(PIP_FILTER)
 	# compat: a plain .pth to the source tree. With setuptools 84 and pip 26 every editable mode
 	# prints a banner (compat: "transitional"; lenient, strict: a notice); this one message is
 	# hidden by a Python warning filter, which pip passes on to the build backend.
 	PYTHONWARNINGS="ignore:Compat editable installs" \
-	  $(PY) -m pip install -q -e ".[test,docs]" --config-settings editable_mode=compat $(PIP_FILTER)
+	  $(1)/bin/python -m pip install -q -e ".[$(2)]" $(3) --config-settings editable_mode=compat \
+	  $(PIP_FILTER)
+endef
+
+$(STAMP): pyproject.toml
+	$(call venv_install,$(VENV),test$(comma)docs,)
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -91,5 +99,26 @@ mutation: $(STAMP)
 	  $(PY) -m pip install -q "mutmut==$(MUTMUT_VERSION)" $(PIP_FILTER)
 	$(PY) -m benchmarks.mutation.run $(MUTATION_ARGS) $(MUTATION_PACKAGES)
 
+# The compat and glue tests on another Ray release of the supported range (pyproject.toml,
+# rllib_asor/ray_compat.py): `make compat RAY=2.58.1`. Its own venv, .venv-ray-<release> (built
+# once, reused; `make clean` removes it), holds torch, that Ray and this tree (editable).
+RAY_RELEASES := 2.58.0 2.58.1 2.59.0 2.60.0
+COMPAT_TESTS := tests/rllib tests/algorithms/test_fast_sac.py tests/algorithms/escp \
+                tests/cli/test_e2e.py
+ifneq ($(filter compat,$(MAKECMDGOALS)),)
+ifneq ($(filter-out $(RAY_RELEASES),$(RAY))$(words $(RAY)),1)
+$(error make compat: RAY='$(RAY)' is not a tested Ray release; allowed: one of $(RAY_RELEASES), e.g. make compat RAY=$(lastword $(RAY_RELEASES)))
+endif
+endif
+.PHONY: compat
+compat: .venv-ray-$(RAY)/.installed
+	.venv-ray-$(RAY)/bin/python -m pytest -q --timeout=900 --durations=10 -n $(TEST_WORKERS) \
+	  $(COMPAT_TESTS)
+
+.venv-ray-%/.installed: pyproject.toml
+	$(call venv_install,.venv-ray-$*,test,"ray[rllib$(comma)tune]==$*")
+	.venv-ray-$*/bin/python -c "import ray; assert ray.__version__ == '$*', ray.__version__"
+	touch $@
+
 clean:
-	rm -rf $(VENV) *.egg-info
+	rm -rf $(VENV) .venv-ray-* *.egg-info

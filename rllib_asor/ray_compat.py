@@ -1,6 +1,8 @@
 """The one wall around Ray/RLlib internals: every private Ray name rllib_asor uses is here.
 
-Written for Ray 2.60.0 (`RAY_VERSION`). Callers use the small functions below and touch no
+Tested against the Ray releases in `RAY_TESTED` (pyproject.toml admits exactly these,
+`RAY_REQUIREMENT`; `make compat RAY=<release>` runs the compat and glue tests on one of them,
+docs/testing.md). Callers use the small functions below and touch no
 name starting with `_` that Ray defines. `PRIVATE_NAMES` lists each private name read
 or written here, with what we use it for; `OVERRIDES` lists the private methods our subclasses
 override (RLlib calls them; the overrides stay in their classes). `missing()` names the ones the
@@ -30,8 +32,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-RAY_VERSION = "2.60.0"
-"""The Ray release this module was written for (and tested against)."""
+RAY_TESTED = ("2.58.0", "2.58.1", "2.59.0", "2.60.0")
+"""The Ray releases this module is tested against, oldest first: every name below exists in
+each of them under the same owner (no lookup here depends on the version)."""
+
+RAY_REQUIREMENT = "ray[rllib,tune]>=2.58,<2.61"
+"""pyproject.toml's Ray requirement: of the releases there are, it admits exactly `RAY_TESTED`."""
 
 _CONFIG = "ray.rllib.algorithms.algorithm_config:AlgorithmConfig"
 _LEARNER = "ray.rllib.core.learner.learner:Learner"
@@ -286,6 +292,16 @@ def _self_attrs(cls: type) -> set[str]:
         and isinstance(n.value, ast.Name)
         and n.value.id == "self"
     }
+
+
+def unsupported_ray(version: str) -> str | None:
+    """None if Ray `version` is one of `RAY_TESTED`, else one line naming the tested ones."""
+    if version in RAY_TESTED:
+        return None
+    return (
+        f"Ray {version} is not one rllib-asor is tested with; tested: {', '.join(RAY_TESTED)} "
+        f"({RAY_REQUIREMENT})"
+    )
 
 
 def missing() -> list[str]:

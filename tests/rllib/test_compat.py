@@ -83,9 +83,23 @@ def unlisted_overrides(source: str, rllib_private: set[str]) -> list[str]:
 def test_every_private_name_compat_relies_on_exists_in_the_installed_ray():
     gone = compat.missing()
     assert not gone, (
-        f"Ray {ray.__version__} lacks {', '.join(gone)} (rllib_asor/ray_compat.py was "
-        f"written for Ray {compat.RAY_VERSION})"
+        f"Ray {ray.__version__} lacks {', '.join(gone)} (rllib_asor/ray_compat.py is "
+        f"tested with Ray {', '.join(compat.RAY_TESTED)})"
     )
+
+
+def test_the_installed_ray_is_a_tested_release():
+    """`make test` runs on the release pip picks from the range, `make compat` on each other."""
+    assert compat.unsupported_ray(ray.__version__) is None, compat.unsupported_ray(
+        ray.__version__
+    )
+
+
+def test_an_untested_ray_is_named_in_one_line_with_the_tested_ones():
+    assert compat.unsupported_ray(compat.RAY_TESTED[-1]) is None
+    said = compat.unsupported_ray("2.57.0")
+    assert said is not None and "\n" not in said and said.startswith("Ray 2.57.0 ")
+    assert all(v in said for v in compat.RAY_TESTED) and compat.RAY_REQUIREMENT in said
 
 
 def test_a_name_gone_from_ray_is_reported(monkeypatch):
