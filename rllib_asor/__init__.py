@@ -18,6 +18,7 @@ register_envs()
 
 if TYPE_CHECKING:
     from rllib_asor.algorithms.escp.config import EscpConfig
+    from rllib_asor.algorithms.gaifo.config import GaifoConfig
     from rllib_asor.algorithms.maple.maple import MapleConfig, MopoConfig
     from rllib_asor.algorithms.osi.config import OsiConfig
     from rllib_asor.algorithms.sac.config import FastSACConfig
@@ -27,6 +28,7 @@ __all__ = [
     "AsorConfig",
     "EscpConfig",
     "FastSACConfig",
+    "GaifoConfig",
     "MapleConfig",
     "MopoConfig",
     "OsiConfig",
@@ -88,4 +90,8 @@ def __getattr__(name: str) -> Any:
         from rllib_asor.algorithms.osi.config import OsiConfig
 
         return OsiConfig
+    if name == "GaifoConfig":  # GAIfO, imported on first use
+        from rllib_asor.algorithms.gaifo.config import GaifoConfig
+
+        return GaifoConfig
     raise AttributeError(f"module 'rllib_asor' has no attribute {name!r}")

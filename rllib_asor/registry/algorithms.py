@@ -17,6 +17,7 @@ ALGORITHMS = {
     "OSI": "rllib_asor.algorithms.osi.config:OSI",  # universal policy + system identification
     "CaDM": "rllib_asor.algorithms.cadm.config:CaDM",  # context-aware dynamics model (model-free)
     "FastSAC": "rllib_asor.algorithms.sac.config:FastSAC",  # SAC on the fast off-policy path
+    "GAIfO": "rllib_asor.algorithms.gaifo.config:GAIfO",  # adversarial imitation from observation
 }
 """Run name → "module:Class"."""
 
