@@ -19,6 +19,7 @@ register_envs()
 if TYPE_CHECKING:
     from rllib_asor.algorithms.escp.config import EscpConfig
     from rllib_asor.algorithms.gaifo.config import GaifoConfig
+    from rllib_asor.algorithms.garat.config import GaratConfig
     from rllib_asor.algorithms.maple.maple import MapleConfig, MopoConfig
     from rllib_asor.algorithms.osi.config import OsiConfig
     from rllib_asor.algorithms.sac.config import FastSACConfig
@@ -29,6 +30,7 @@ __all__ = [
     "EscpConfig",
     "FastSACConfig",
     "GaifoConfig",
+    "GaratConfig",
     "MapleConfig",
     "MopoConfig",
     "OsiConfig",
@@ -94,4 +96,8 @@ def __getattr__(name: str) -> Any:
         from rllib_asor.algorithms.gaifo.config import GaifoConfig
 
         return GaifoConfig
+    if name == "GaratConfig":  # GARAT, imported on first use
+        from rllib_asor.algorithms.garat.config import GaratConfig
+
+        return GaratConfig
     raise AttributeError(f"module 'rllib_asor' has no attribute {name!r}")

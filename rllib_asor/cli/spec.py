@@ -60,7 +60,7 @@ class ExperimentSpec(BaseModel):
     config: dict[str, Any] = {}
     """The AlgorithmConfig settings by name (old names are translated with a warning), any
     value may be `{grid_search: [...]}`; our own blocks: `asor:`, `escp:`, `maple:`, `dara:`, `osi:`,
-    `cadm:`, `gaifo:`."""
+    `cadm:`, `gaifo:`, `garat:`."""
     checkpoint_config: CheckpointSettings = CheckpointSettings()
     """When checkpoints are saved and how many are kept."""
     num_samples: Annotated[int, Field(ge=1), Allowed("an integer >= 1")] = 1
@@ -111,6 +111,9 @@ SETTINGS_BLOCKS: dict[str, SettingsBlock] = {
     ),
     "gaifo": SettingsBlock(
         "rllib_asor.algorithms.gaifo.settings:GaifoSettings", ("GAIfO",), "gaifo_settings"
+    ),
+    "garat": SettingsBlock(
+        "rllib_asor.algorithms.garat.settings:GaratSettings", ("GARAT",), "garat_settings"
     ),
 }
 """Our `config:` blocks by name; validate.py checks each, `rllib schema` describes each."""

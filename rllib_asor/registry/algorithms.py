@@ -18,6 +18,7 @@ ALGORITHMS = {
     "CaDM": "rllib_asor.algorithms.cadm.config:CaDM",  # context-aware dynamics model (model-free)
     "FastSAC": "rllib_asor.algorithms.sac.config:FastSAC",  # SAC on the fast off-policy path
     "GAIfO": "rllib_asor.algorithms.gaifo.config:GAIfO",  # adversarial imitation from observation
+    "GARAT": "rllib_asor.algorithms.garat.config:GARAT",  # grounded action transformation
 }
 """Run name → "module:Class"."""
 
