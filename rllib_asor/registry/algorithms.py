@@ -19,6 +19,8 @@ ALGORITHMS = {
     "FastSAC": "rllib_asor.algorithms.sac.config:FastSAC",  # SAC on the fast off-policy path
     "GAIfO": "rllib_asor.algorithms.gaifo.config:GAIfO",  # adversarial imitation from observation
     "GARAT": "rllib_asor.algorithms.garat.config:GARAT",  # grounded action transformation
+    "BCO": "rllib_asor.algorithms.bco.config:BCO",  # behavioural cloning from observation
+    "SOIL": "rllib_asor.algorithms.soil.config:SOIL",  # PPO + IDM-inferred imitation term
 }
 """Run name → "module:Class"."""
 

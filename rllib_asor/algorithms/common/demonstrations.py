@@ -234,7 +234,9 @@ def rollout_demonstrations(
         act = lambda o: batch(loop.stack_obs([o]))[0]  # noqa: E731
     made = isinstance(env, str)
     if made:
-        import rllib_asor  # noqa: F401  (registers our env ids)
+        from rllib_asor.registry.envs import register_envs
+
+        register_envs()  # our env ids
 
         env = gym.make(env, **dict(env_kwargs or {}))
     if action_fn is None:
@@ -254,3 +256,12 @@ def rollout_demonstrations(
         if made:
             env.close()
     return demonstrations_from_episodes(trajectories)
+
+
+def resolve_path(path: str | os.PathLike[str]) -> str:
+    """`path`, or relative to the directory Tune started in (trials run in their own)."""
+    path = os.fspath(path)
+    if os.path.isabs(path) or os.path.exists(path):
+        return path
+    start = os.environ.get("TUNE_ORIG_WORKING_DIR")
+    return os.path.join(start, path) if start else path
