@@ -117,6 +117,21 @@ def soil_learner(config: Any) -> Any:
     return config
 
 
+def with_env_spaces(config: Any) -> Any:
+    """`config` with the env's observation and action spaces set where it has none (RLlib's
+    offline algorithms need them when they evaluate nothing); the env must be a registered id."""
+    if config.observation_space is not None and config.action_space is not None:
+        return config
+    if not isinstance(config.env, str) or config.env not in gym.registry:
+        return config
+    env = gym.make(config.env, **dict(config.env_config or {}))
+    try:
+        config.environment(observation_space=env.observation_space, action_space=env.action_space)
+    finally:
+        env.close()
+    return config
+
+
 class SOILOffline(MARWIL):
     """MARWIL with SOIL's demonstration term; evaluates itself on the data's dynamics."""
 
@@ -124,7 +139,7 @@ class SOILOffline(MARWIL):
         if isinstance(config, dict):
             config = self.get_default_config().update_from_dict(config)
         if config is not None:
-            config = soil_learner(config)
+            config = with_env_spaces(soil_learner(config))
         super().__init__(config, *args, **kwargs)
 
     @classmethod
