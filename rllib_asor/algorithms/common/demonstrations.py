@@ -107,7 +107,8 @@ def load_demonstrations(path: str | os.PathLike[str], observation_space: Any) ->
     """
     p = Path(path)
     if not p.exists():
-        raise ValueError(f"demonstrations {p} do not exist; {ALLOWED}")
+        hint = "; make the offline datasets first: `make datasets`" if "offline" in p.parts else ""
+        raise ValueError(f"demonstrations {p} do not exist{hint}; {ALLOWED}")
     if p.is_file() and p.suffix == ".npz":
         demos = _read_npz(p)
     elif p.is_dir():

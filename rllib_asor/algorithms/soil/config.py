@@ -14,7 +14,7 @@ PPO Learner for the same with SOIL mixed in), so `with_asor` finds PPO's ASOR Le
 Offline (the paper's Table 1): `SoilOfflineConfig` (a `MARWILConfig`, RLlib's offline
 policy-gradient-like algorithm, with `.soil(...)`) and `SOILOffline`; `run: SOIL` with `input:`
 in a YAML file builds that one (`SOIL.offline_variant`). It evaluates itself on the data's
-dynamics every `evaluation_interval` iterations (`evaluation/<dynamics>/...`, as MAPLE).
+dynamics every `soil.evaluation_interval` iterations (`evaluation/<dynamics>/...`, as MAPLE).
 """
 
 from __future__ import annotations
@@ -91,15 +91,12 @@ class SoilOfflineConfig(_SoilSettingsMixin, MARWILConfig):
     def __init__(self, algo_class: type | None = None) -> None:
         super().__init__(algo_class=algo_class or SOILOffline)
         self.soil_settings: dict[str, Any] = SoilSettings().to_dict()
-        self.evaluation_every = 10
-        """Own evaluation every this many iterations (0: never)."""
-        self.evaluation_episodes_per_dynamics = 5
-        """Episodes per dynamics of the own evaluation."""
 
     def get_default_learner_class(self) -> type:
         return MARWILTorchLearner
 
     def validate(self) -> None:
+        with_env_spaces(self)  # RLlib's offline check wants them when nothing is evaluated
         super().validate()
         if not offline_parts(self):
             raise ValueError(
@@ -148,10 +145,9 @@ class SOILOffline(MARWIL):
 
     def training_step(self) -> None:
         super().training_step()
-        every = getattr(self.config, "evaluation_every", 0)
-        if every and (self.iteration + 1) % every == 0:
-            episodes = self.config.evaluation_episodes_per_dynamics
-            flat = evaluate_on_data(self, episodes)
+        s = SoilSettings.from_dict(self.config.soil_settings)
+        if s.evaluation_interval and (self.iteration + 1) % s.evaluation_interval == 0:
+            flat = evaluate_on_data(self, s.evaluation_episodes)
             if flat:
                 self.metrics.log_dict(flat, key="evaluation", window=1)
 

@@ -47,6 +47,11 @@ class SoilSettings(Settings):
     """Transitions per step of the inverse dynamics model."""
     idm_capacity: IntAtLeast1 = 1_000_000
     """The newest transitions of the policy's that its buffer keeps."""
+    evaluation_interval: Annotated[int, Field(ge=0), Allowed("an int ≥ 0")] = 10
+    """Offline: evaluate the policy under the data's dynamics every this many iterations
+    (`evaluation/...`; 0: never). Online runs report the env runners' returns."""
+    evaluation_episodes: IntAtLeast1 = 5
+    """Offline: episodes per dynamics of that evaluation."""
     seed: int = 0
     """Seed of the model's initial weights and the row sampling."""
 
