@@ -29,7 +29,9 @@ def lava_expert(obs_mode: str = "onehot"):
     return act
 
 
-def lava_demonstrations(episodes: int = 20, seed: int = 0, obs_mode: str = "onehot") -> Demonstrations:
+def lava_demonstrations(
+    episodes: int = 20, seed: int = 0, obs_mode: str = "onehot"
+) -> Demonstrations:
     """`episodes` expert episodes, the lava row drawn per episode."""
     env = LavaWorldEnv(obs_mode=obs_mode)
     return rollout_demonstrations(lava_expert(obs_mode), env, episodes, seed=seed)
