@@ -29,7 +29,7 @@ from rllib_asor.algorithms.garat.settings import GaratSettings
 NO_DEMOS = (
     "GARAT needs the target's transitions: set garat.demonstrations (YAML) or "
     "GaratConfig().garat(demonstrations=PATH) to an .npz of state-only transitions recorded "
-    "in the target env with uniformly random actions"
+    "in the target env by the behaviour policy (garat.behaviour_policy; none: random actions)"
 )
 
 
@@ -45,9 +45,10 @@ class GaratConfig(PPOConfig):
     def garat(self, **settings: Any) -> GaratConfig:
         """Set GARAT's settings (fields of `GaratSettings`; `demonstrations` a path, made
         absolute here); ValueError names a bad key/value."""
-        path = settings.get("demonstrations")
-        if isinstance(path, os.PathLike | str):
-            settings["demonstrations"] = os.path.abspath(os.fspath(path))
+        for key in ("demonstrations", "behaviour_policy"):
+            path = settings.get(key)
+            if isinstance(path, os.PathLike | str):
+                settings[key] = os.path.abspath(os.fspath(path))
         self.garat_settings = GaratSettings.from_dict(
             {**self.garat_settings, **settings}
         ).to_dict()
@@ -71,6 +72,12 @@ class GaratConfig(PPOConfig):
         finally:
             source.close()
         load_demonstrations(resolve_path(settings.demonstrations), space)
+        policy = settings.behaviour_policy
+        if policy and not os.path.exists(resolve_path(policy)):
+            raise ValueError(
+                f"garat.behaviour_policy {policy} does not exist; allowed: an Algorithm's or an "
+                "RLModule's checkpoint directory, or null (random actions)"
+            )
 
 
 def garat_grounded(config: Any) -> Any:
@@ -83,7 +90,10 @@ def garat_grounded(config: Any) -> Any:
     if config.garat_grounded is None:
         config.validate()
         env, env_config = config.env, dict(config.env_config or {})
-        transformer, stats = ground(env, env_config, s, resolve_path(s.demonstrations))
+        behaviour = resolve_path(s.behaviour_policy) if s.behaviour_policy else None
+        transformer, stats = ground(
+            env, env_config, s, resolve_path(s.demonstrations), behaviour
+        )
         config.garat_grounded = {
             "env": env,
             "env_config": env_config,
@@ -102,11 +112,10 @@ def garat_grounded(config: Any) -> Any:
     )
     target = s.target_env_config if s.target_env_config is not None else g["env_config"]
     # The target: the same wrapper with no transformer (RLlib merges env_config overrides).
-    config.evaluation(
-        evaluation_config=PPOConfig.overrides(
-            env_config={"env_config": dict(target), "transformer": None}
-        )
-    )
+    user = dict(config.evaluation_config or {})
+    user["env_config"] = {**dict(user.get("env_config") or {}), "env_config": dict(target),
+                          "transformer": None}
+    config.evaluation(evaluation_config=user)
     return config
 
 
@@ -124,6 +133,32 @@ class GARAT(PPO):
     @classmethod
     def get_default_config(cls) -> GaratConfig:
         return GaratConfig()
+
+    def setup(self, config: Any) -> None:
+        super().setup(config)
+        s = GaratSettings.from_dict(self.config.garat_settings)
+        if s.behaviour_policy and self.iteration == 0:
+            self._start_from(resolve_path(s.behaviour_policy))
+
+    def _start_from(self, path: str) -> None:
+        """The policy starts as the behaviour policy π₀ (the authors' `--load_policy_path`)."""
+        from ray.rllib.core import DEFAULT_MODULE_ID
+
+        from rllib_asor.evaluation.rollout import policy_module
+
+        state = policy_module(path).get_state()
+        try:
+            self.learner_group.foreach_learner(
+                lambda learner: learner.module[DEFAULT_MODULE_ID].set_state(state)
+            )
+        except Exception as e:  # noqa: BLE001  (a shape mismatch, as one line)
+            raise ValueError(
+                f"garat.behaviour_policy {path}: its weights do not fit this config's policy "
+                f"({str(e).splitlines()[0][:200]}); allowed: a checkpoint of the same model_config"
+            ) from None
+        self.env_runner_group.sync_weights(
+            from_worker_or_learner_group=self.learner_group, inference_only=True
+        )
 
     def training_step(self) -> None:
         super().training_step()

@@ -1,7 +1,8 @@
 """GARAT's two envs around a source env (a gymnasium id and its kwargs).
 
 - `GroundingEnv` (the authors' `ATPEnv`): the action transformer's MDP. Observation (s_t, a_t)
-  with a_t the behaviour policy's action (here uniformly random, see docs/baselines.md), action
+  with a_t the behaviour policy's action (a checkpoint's deterministic action, the authors' π₀,
+  or uniformly random actions, see docs/baselines.md), action
   Δ_t in ±`action_tf_ratio`·half the action range, the source stepped with clip(a_t + Δ_t).
   Its reward is 0: GAIfO's piece writes the discriminator's.
 - `GroundedEnv` (the authors' `GroundedEnv`): the source env whose actions a become
@@ -29,9 +30,19 @@ def _box(space: gym.Space, what: str) -> gym.spaces.Box:
     return space
 
 
+def behaviour_policy(path: str) -> Any:
+    """obs -> the deterministic action of the policy saved at `path` (an Algorithm's or an
+    RLModule's checkpoint), as RLlib's env runner plays a PPO action (clipped later)."""
+    from rllib_asor.evaluation.rollout import module_policy, policy_module, stack_obs
+
+    act = module_policy(policy_module(path), False)
+    return lambda obs: np.asarray(act(stack_obs([obs]), None)[0], np.float32).reshape(-1)
+
+
 class GroundingEnv(gym.Env):
     """The action transformer's MDP (module docstring). `config`: env, env_config,
-    action_tf_ratio, seed."""
+    action_tf_ratio, seed, behaviour (a checkpoint path or a function obs -> action; None:
+    uniformly random actions)."""
 
     def __init__(self, config: dict[str, Any] | None = None) -> None:
         config = dict(config or {})
@@ -46,10 +57,16 @@ class GroundingEnv(gym.Env):
         max_delta = (self.high - self.low) / 2 * float(config.get("action_tf_ratio", 2.0))
         self.action_space = gym.spaces.Box(-max_delta, max_delta, dtype=np.float32)
         self._rng = np.random.default_rng(config.get("seed", 0))
+        behaviour = config.get("behaviour")  # a checkpoint path, or (Python) obs -> action
+        self._policy = (
+            behaviour if callable(behaviour) else behaviour_policy(behaviour) if behaviour else None
+        )
         self._s: np.ndarray | None = None
         self._a: np.ndarray | None = None
 
     def _behaviour(self) -> np.ndarray:
+        if self._policy is not None:
+            return np.clip(self._policy(self._s), self.low, self.high).astype(np.float32)
         return self._rng.uniform(self.low, self.high).astype(np.float32)
 
     def _obs(self) -> np.ndarray:

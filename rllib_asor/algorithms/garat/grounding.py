@@ -8,6 +8,7 @@ transitions; the GAIL reward −log(1 − D) is the transformer's only reward, a
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -18,10 +19,16 @@ from rllib_asor.algorithms.garat.settings import GaratSettings
 
 
 def ground(
-    env: str, env_config: dict[str, Any] | None, settings: GaratSettings, demonstrations: str
+    env: str,
+    env_config: dict[str, Any] | None,
+    settings: GaratSettings,
+    demonstrations: str,
+    behaviour: str | Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> tuple[dict[str, Any], dict[str, float]]:
     """Train the transformer on the source `env` (with `env_config`) against the target's
-    `demonstrations`; returns ({"spec", "state"}, statistics of the last iteration)."""
+    `demonstrations` (`behaviour`: the behaviour policy's checkpoint or a function obs -> action,
+    None: random actions);
+    returns ({"spec", "state"}, statistics of the last iteration)."""
     from rllib_asor.algorithms.gaifo.config import GaifoConfig
 
     s = settings
@@ -40,6 +47,7 @@ def ground(
                 "env_config": dict(env_config or {}),
                 "action_tf_ratio": s.action_tf_ratio,
                 "seed": s.seed,
+                "behaviour": behaviour,
             },
         )
         .env_runners(num_env_runners=0, num_envs_per_env_runner=1)

@@ -28,8 +28,13 @@ class GaratSettings(Settings):
     demonstrations: Annotated[
         str | None, Allowed("a path: an .npz of state-only target transitions or a dataset dir")
     ] = None
-    """The target's transitions, recorded with uniformly random actions (the grounding MDP's
-    behaviour policy, see the package docs)."""
+    """The target's transitions, recorded by the behaviour policy (`behaviour_policy`)."""
+    behaviour_policy: Annotated[
+        str | None, Allowed("null or a checkpoint path (an Algorithm's or an RLModule's)")
+    ] = None
+    """The grounding's behaviour policy: a checkpoint whose deterministic action plays a_t, as
+    the authors' initial policy π₀ (the target data must be its rollouts in the target); None:
+    uniformly random actions (the target data recorded with random actions)."""
     target_env_config: Annotated[
         dict[str, Any] | None, Allowed("null or a mapping (the target env's env_config)")
     ] = None
