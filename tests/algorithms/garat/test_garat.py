@@ -50,6 +50,15 @@ def tiny_garat(target_data: str) -> GaratConfig:
     )
 
 
+def _wraps(env, cls) -> bool:
+    """Whether `cls` is somewhere in the env runner's env's wrapper chain."""
+    while env is not None:
+        if isinstance(env, cls):
+            return True
+        env = getattr(env, "env", None) or (getattr(env, "envs", None) or [None])[0]
+    return False
+
+
 def _gravity(env) -> float:
     while not hasattr(env.unwrapped, "g"):
         env = getattr(env.unwrapped, "env", None) or env.unwrapped.envs[0]
@@ -118,7 +127,10 @@ def test_garat_grounds_trains_in_the_grounded_source_and_evaluates_in_the_target
 ):
     algo = tiny_garat(target_data).build_algo()
     try:
-        assert isinstance(algo.env_runner.env.unwrapped.envs[0], GroundedEnv)
+        assert _wraps(algo.env_runner.env, GroundedEnv)
+        assert not _wraps(algo.eval_env_runner.env.unwrapped.envs[0], GroundedEnv) or (
+            algo.eval_env_runner.config.env_config["transformer"] is None
+        )
         assert _gravity(algo.env_runner.env) == 10.0 and _gravity(algo.eval_env_runner.env) == 12.0
         result = algo.train()
         assert np.isfinite(result["garat"]["grounding_disc_loss"])
