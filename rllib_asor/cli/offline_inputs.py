@@ -34,6 +34,24 @@ def check_offline_input(exp: Experiment) -> None:
         )
 
 
+def check_demonstrations(exp: Experiment) -> None:
+    """A `demonstrations:` path of an imitation block that does not exist fails here, before
+    Ray starts (relative paths: from the working directory, where Tune starts)."""
+    for key in DEMONSTRATION_KEYS:
+        given = _demonstrations_path(exp, key)
+        if given and not os.path.exists(given):
+            from rllib_asor.algorithms.common.demonstrations import ALLOWED
+
+            hint = (
+                "; make the offline datasets first: `make datasets`" if "offline" in given else ""
+            )
+            raise UsageError(
+                f"demonstrations {given} do not exist{hint}; {ALLOWED}",
+                source=exp.source,
+                key=f"{exp.name}.config.{key.removesuffix('_settings')}.demonstrations",
+            )
+
+
 def tiny_test_data(exp: Experiment) -> None:
     """--test on a fresh clone: stand-ins for the missing datasets, in a temporary folder."""
     from rllib_asor.data.format import DYNAMICS, QUALITIES

@@ -25,18 +25,20 @@ OWN_EVALUATION = (
     Source(
         "maple-evaluation",
         "evaluation/mean/normalized_score",
-        "D4RL-normalised score of MAPLE's own evaluation (greedy, each dynamics of the data, "
-        "their mean; `evaluation/mean/normalized_score`, last value)",
+        "D4RL-normalised score of its own evaluation (MAPLE family, BCO, SOIL; greedy, each "
+        "dynamics of the data, their mean; `evaluation/mean/normalized_score`, last value)",
     ),
     Source(
         "maple-evaluation",
         "evaluation/mean/return_mean",
-        "return of MAPLE's own evaluation (greedy, each dynamics of the data, their mean; "
-        "`evaluation/mean/return_mean`, last value; the data has no reference returns)",
+        "return of its own evaluation (MAPLE family, BCO, SOIL; greedy, each dynamics of the "
+        "data, their mean; `evaluation/mean/return_mean`, last value; the data has no reference "
+        "returns)",
     ),
 )
-"""Scores of methods that evaluate themselves (MAPLE, MOPO and their +DARA/+ASOR), in order of
-preference: the first that every trial of the group has."""
+"""Scores of methods that evaluate themselves (MAPLE, MOPO and their +DARA/+ASOR; offline BCO
+and SOIL log the same keys), in order of preference: the first that every trial of the group
+has."""
 
 
 def _scores(trials: list[Trial], source: Source, last_n: int) -> list[float]:

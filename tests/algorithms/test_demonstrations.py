@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import gymnasium as gym
@@ -42,6 +43,9 @@ def test_npz_round_trip_is_exact_and_leaves_no_temporary_file(tmp_path):
     path = tmp_path / "sub" / "demos.npz"
     save_demonstrations(path, d)
     assert [p.name for p in path.parent.iterdir()] == ["demos.npz"]
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask  # not mkstemp's private 0600
     back = load_demonstrations(path, BOX3)
     for name in ("obs", "next_obs", "episode_ids", "terminateds"):
         np.testing.assert_array_equal(getattr(back, name), getattr(d, name))

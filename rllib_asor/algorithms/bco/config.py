@@ -101,13 +101,14 @@ class BcoConfig(AlgorithmConfig):
         settings = BcoSettings.from_dict(self.bco_settings)
         if not settings.demonstrations:
             raise ValueError(NO_DEMOS)
-        if isinstance(self.env, str) and self.env in gym.registry:
+        path = resolve_path(settings.demonstrations)
+        if os.path.exists(path) and isinstance(self.env, str) and self.env in gym.registry:
             env = gym.make(self.env, **dict(self.env_config or {}))
             try:
                 space = env.observation_space
             finally:
                 env.close()
-            load_demonstrations(resolve_path(settings.demonstrations), space)
+            load_demonstrations(path, space)  # missing ones: the CLI's and setup's error
 
 
 class BCO(Algorithm):

@@ -92,6 +92,9 @@ def save_demonstrations(path: str | os.PathLike[str], demos: Demonstrations) -> 
     try:
         with os.fdopen(fd, "wb") as f:
             np.savez(f, **{name: getattr(demos, name) for name in ARRAYS})
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's 0600 -> what open() would have made
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

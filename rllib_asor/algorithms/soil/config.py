@@ -54,13 +54,15 @@ class _SoilSettingsMixin:
         if not settings.demonstrations:
             raise ValueError(NO_DEMOS)
         env = getattr(self, "env", None)
-        if isinstance(env, str) and env in gym.registry:  # other envs: checked by the Learner
+        path = resolve_path(settings.demonstrations)
+        # other envs, and missing files (the CLI's and the Learner's error): checked by the Learner
+        if os.path.exists(path) and isinstance(env, str) and env in gym.registry:
             made = gym.make(env, **dict(getattr(self, "env_config", None) or {}))
             try:
                 space = made.observation_space
             finally:
                 made.close()
-            load_demonstrations(resolve_path(settings.demonstrations), space)
+            load_demonstrations(path, space)
 
 
 class SoilConfig(_SoilSettingsMixin, PPOConfig):
