@@ -89,13 +89,27 @@ class GroundingEnv(gym.Env):
         self.source.close()
 
 
+class SavedTransformer:
+    """The transformer's RLModule spec and weights, kept in the config (pickled with it into
+    checkpoints and env runners); its repr is one line, so results and logs that print the
+    config (Tune's result.json) do not carry the weights."""
+
+    def __init__(self, spec: Any, state: dict[str, Any]) -> None:
+        self.spec, self.state = spec, state
+
+    def __getitem__(self, key: str) -> Any:
+        return {"spec": self.spec, "state": self.state}[key]
+
+    def __repr__(self) -> str:
+        n = sum(int(np.size(v)) for v in self.state.values())
+        return f"SavedTransformer({n} weights)"
+
+
 class Transformer:
     """Δ(s, a): the deterministic action (the mean) of the transformer's RLModule, clipped to
-    its action space. Built from `{"spec": RLModuleSpec, "state": module state}`."""
+    its action space. Built from a `SavedTransformer` (or `{"spec": ..., "state": ...}`)."""
 
-    def __init__(self, saved: dict[str, Any]) -> None:
-        import torch  # noqa: F401
-
+    def __init__(self, saved: Any) -> None:
         self.module = saved["spec"].build()
         self.module.set_state(saved["state"])
         self.module.eval()

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-from rllib_asor.algorithms.garat.envs import GroundingEnv, make_source
+from rllib_asor.algorithms.garat.envs import GroundingEnv, SavedTransformer, make_source
 from rllib_asor.algorithms.garat.settings import GaratSettings
 
 
@@ -24,11 +24,11 @@ def ground(
     settings: GaratSettings,
     demonstrations: str,
     behaviour: str | Callable[[np.ndarray], np.ndarray] | None = None,
-) -> tuple[dict[str, Any], dict[str, float]]:
+) -> tuple[SavedTransformer, dict[str, float]]:
     """Train the transformer on the source `env` (with `env_config`) against the target's
     `demonstrations` (`behaviour`: the behaviour policy's checkpoint or a function obs -> action,
     None: random actions);
-    returns ({"spec", "state"}, statistics of the last iteration)."""
+    returns (the transformer, statistics of the last iteration)."""
     from rllib_asor.algorithms.gaifo.config import GaifoConfig
 
     s = settings
@@ -84,15 +84,15 @@ def ground(
                 for k, v in (result.get("learners", {}).get("gaifo") or {}).items()
             }
         module = algo.get_module()
-        saved = {
-            "spec": RLModuleSpec(
+        saved = SavedTransformer(
+            RLModuleSpec(
                 module_class=type(module),
                 observation_space=module.observation_space,
                 action_space=module.action_space,
                 model_config=module.model_config,
             ),
-            "state": module.get_state(inference_only=False),
-        }
+            module.get_state(inference_only=False),
+        )
     finally:
         algo.stop()
     return saved, stats

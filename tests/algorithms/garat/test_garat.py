@@ -136,6 +136,7 @@ def test_garat_grounds_trains_in_the_grounded_source_and_evaluates_in_the_target
         assert np.isfinite(result["garat"]["grounding_disc_loss"])
         assert np.isfinite(result["evaluation"]["env_runners"]["episode_return_mean"])
         grounded = algo.config.garat_grounded
+        assert repr(grounded["transformer"]).startswith("SavedTransformer(")  # no weights in logs
         checkpoint = algo.save_to_path(str(tmp_path / "ckpt"))
         weights = algo.get_module().get_state()
         algo.get_module().save_to_path(str(tmp_path / "pi0"))
