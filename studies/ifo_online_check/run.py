@@ -239,8 +239,8 @@ def _returns(env, act, episodes: int = 20) -> float:
     return float(np.mean(rets))
 
 
-def garat_pi0() -> None:
-    """Run 2: the grounding under a deterministic behaviour policy π₀ (README.md)."""
+def garat_pi0(disc_steps: str = "5") -> None:
+    """Run 2 (run 3: `disc_steps` 50): the grounding under a deterministic π₀ (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
@@ -259,7 +259,10 @@ def garat_pi0() -> None:
     rows = rng.choice(len(demos), 2000, replace=False)
     for seed in SEEDS:
         t0 = time.time()
-        settings = GaratSettings(grounding_iterations=30, grounding_batch_size=2000, seed=seed)
+        settings = GaratSettings(
+            grounding_iterations=30, grounding_batch_size=2000, seed=seed,
+            disc_steps=int(disc_steps),
+        )
         transformer, stats = ground("Pendulum-v1", SOURCE, settings, str(path), pendulum_pi0)
         target = gym.make("Pendulum-v1", **TARGET).unwrapped
         source = gym.make("Pendulum-v1", **SOURCE).unwrapped
@@ -287,8 +290,9 @@ def garat_pi0() -> None:
             "grounding": stats,
             "wall_s": round(time.time() - t0, 1),
         }
-        print(f"GARAT pi0 seed {seed}: {row}")
-        _save(f"garat_pi0/seed{seed}", row)
+        tag = "garat_pi0" if disc_steps == "5" else f"garat_pi0_disc{disc_steps}"
+        print(f"GARAT pi0 ({disc_steps} D steps) seed {seed}: {row}")
+        _save(f"{tag}/seed{seed}", row)
 
 
 if __name__ == "__main__":
