@@ -237,11 +237,7 @@ def rollout_demonstrations(
         batch = loop.module_policy(loop.policy_module(policy), explore)
         act = lambda o: batch(loop.stack_obs([o]))[0]  # noqa: E731
     made = isinstance(env, str)
-    if made:
-        from rllib_asor.registry.envs import register_envs
-
-        register_envs()  # our env ids
-
+    if made:  # our env ids are registered: importing any rllib_asor module registers them
         env = gym.make(env, **dict(env_kwargs or {}))
     if action_fn is None:
         action_fn = loop.to_int if isinstance(env.action_space, gym.spaces.Discrete) else loop.clip

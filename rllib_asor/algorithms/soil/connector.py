@@ -1,6 +1,7 @@
 """SOIL's Learner connector piece (online): the policy's (s, a, s′) of each batch train the
-inverse dynamics model, which then relabels the expert transitions; right before GAE (before
-ASOR's piece when ASOR is on). It changes nothing in the batch.
+inverse dynamics model, which then relabels the expert transitions; right after the batch became
+tensors (`NumpyToTensor`, before GAE and before ASOR's piece when ASOR is on). It changes
+nothing in the batch.
 
 It sees PPO's batch as ASOR's piece does: torch tensors, each episode chunk ending with a
 bootstrap row (`Columns.LOSS_MASK` False) that holds s_T, so the row after a valid row i is

@@ -2,19 +2,21 @@
 adds its demonstration term to the policy's loss, and keeps it in the Learner's state
 (checkpoints).
 
-Online (PPO) the model learns from each batch through `SoilIdmPiece`, right before GAE (before
-ASOR's piece when ASOR is on). Offline (MARWIL, `input_` set) RLlib's connector pipeline never
-sees the dataset's episodes in order, so the model is fitted once, when the Learner is built,
-on the dataset's own transitions (`idm_steps` minibatches), and labels the experts once.
+Online (PPO) the model learns from each batch through `SoilIdmPiece`, right after the batch
+became tensors (`NumpyToTensor`; before GAE and before ASOR's piece when ASOR is on). Offline
+(MARWIL, `input_` set) RLlib's connector pipeline never sees the dataset's episodes in order,
+so the model is fitted once, when the Learner is built, on the dataset's own transitions
+(`idm_steps` minibatches), and labels the experts once.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import torch.distributed as dist
 from ray.rllib.algorithms.marwil.torch.marwil_torch_learner import MARWILTorchLearner
 from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
-from ray.rllib.connectors.learner import GeneralAdvantageEstimation
+from ray.rllib.connectors.common import NumpyToTensor
 from ray.rllib.core.columns import Columns
 
 from rllib_asor import ray_compat as compat
@@ -23,7 +25,6 @@ from rllib_asor.algorithms.common.ifo_data import dataset_transitions, offline_p
 from rllib_asor.algorithms.soil.connector import METRICS_KEY, SoilIdmPiece
 from rllib_asor.algorithms.soil.imitation import SoilImitation
 from rllib_asor.algorithms.soil.settings import SoilSettings
-from rllib_asor.rllib.connector import AsorRewardConnector, rank_and_size
 
 STATE_KEY = "soil_imitation"
 """Key of SOIL's state in the Learner's state."""
@@ -51,7 +52,7 @@ class SoilLearnerMixin:
         )
         policy = self.module[self._soil_ids[0]].unwrapped()  # type: ignore[attr-defined]
         demos = load_demonstrations(resolve_path(settings.demonstrations), policy.observation_space)
-        rank, _ = rank_and_size()
+        rank = dist.get_rank() if dist.is_available() and dist.is_initialized() else 0
         batch = self.config.train_batch_size_per_learner  # type: ignore[attr-defined]
         self.soil = SoilImitation(
             settings,
@@ -70,21 +71,13 @@ class SoilLearnerMixin:
             raise ValueError(
                 "SOIL needs the Learner connector pipeline; set num_aggregator_actors_per_learner=0"
             )
-        anchor = next(
-            (
-                c
-                for c in pipeline.connectors
-                if isinstance(c, AsorRewardConnector | GeneralAdvantageEstimation)
-            ),
-            None,
-        )
-        if anchor is None:
+        if not any(isinstance(c, NumpyToTensor) for c in pipeline.connectors):
             raise ValueError(
-                "SOIL's piece goes before GAE, and this Learner pipeline has none (keep "
-                "add_default_connectors_to_learner_pipeline=True)"
+                "SOIL's piece reads the Learner's tensor batch, and this Learner pipeline has no "
+                "NumpyToTensor (keep add_default_connectors_to_learner_pipeline=True)"
             )
         piece = SoilIdmPiece(imitation=self.soil, module_ids=self._soil_ids)
-        pipeline.insert_before(type(anchor), piece)
+        pipeline.insert_after(NumpyToTensor, piece)
 
     def compute_loss_for_module(
         self, *, module_id: str, config: Any, batch: dict[str, Any], fwd_out: dict[str, Any]
