@@ -1,5 +1,5 @@
 """GAIfO's Learner connector piece: the discriminator's reward in place of the env's, then one
-discriminator update, right before GAE (and before ASOR's piece, when ASOR is on).
+discriminator update, right after NumpyToTensor (before GAE and before ASOR's piece).
 
 It sees PPO's batch as ASOR's piece does: torch tensors, each episode chunk ending with a
 bootstrap row (`Columns.LOSS_MASK` False) that holds s_T, so the row after a valid row i is

@@ -1,7 +1,7 @@
 """GAIfO's Learner: a PPO Learner that owns the discriminator (`GaifoTrainer`, its own Adam)
-and puts GAIfO's reward piece into its Learner connector right before GAE (before ASOR's piece
-when ASOR is on, so ASOR's bonus is added to the imitation reward). Its state (checkpoints)
-carries the discriminator, its optimizer and the sampling rng."""
+and puts GAIfO's reward piece into its Learner connector right after NumpyToTensor, i.e. before
+GAE and before ASOR's piece when ASOR is on (ASOR's bonus is added to the imitation reward).
+Its state (checkpoints) carries the discriminator, its optimizer and the sampling rng."""
 
 from __future__ import annotations
 
@@ -9,15 +9,16 @@ import os
 from typing import Any
 
 import gymnasium as gym
+import torch.distributed as dist
 from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
-from ray.rllib.connectors.learner import GeneralAdvantageEstimation
+from ray.rllib.connectors.common import NumpyToTensor
 
 from rllib_asor import ray_compat as compat
 from rllib_asor.algorithms.common.demonstrations import load_demonstrations
+from rllib_asor.algorithms.common.pipeline import insert_beside
 from rllib_asor.algorithms.gaifo.connector import GaifoRewardPiece
 from rllib_asor.algorithms.gaifo.settings import GaifoSettings
 from rllib_asor.algorithms.gaifo.trainer import GaifoTrainer
-from rllib_asor.rllib.connector import AsorRewardConnector, rank_and_size
 
 STATE_KEY = "gaifo_discriminator"
 """Key of the discriminator's state in the Learner's state."""
@@ -62,27 +63,19 @@ class GaifoLearnerMixin:
         demos = load_demonstrations(
             resolve_path(settings.demonstrations), demonstration_space(space, settings)
         )
-        rank, _ = rank_and_size()
+        rank = dist.get_rank() if dist.is_available() and dist.is_initialized() else 0
         self.gaifo = GaifoTrainer(settings, demos, self._device, rank)  # type: ignore[attr-defined]
         pipeline = compat.learner_connector(self)
         if pipeline is None:
             raise ValueError(
                 "GAIfO needs the Learner connector pipeline; set num_aggregator_actors_per_learner=0"
             )
-        anchor = next(
-            (
-                c
-                for c in pipeline.connectors
-                if isinstance(c, AsorRewardConnector | GeneralAdvantageEstimation)
-            ),
-            None,
+        # Right after NumpyToTensor: before GAE and before ASOR's piece (which sits right
+        # before GAE), so ASOR's bonus is added to the imitation reward.
+        insert_beside(
+            pipeline, NumpyToTensor, GaifoRewardPiece(trainer=self.gaifo, module_ids=ids),
+            before=False,
         )
-        if anchor is None:
-            raise ValueError(
-                "GAIfO's reward piece goes before GAE, and this Learner pipeline has none (keep "
-                "add_default_connectors_to_learner_pipeline=True)"
-            )
-        pipeline.insert_before(type(anchor), GaifoRewardPiece(trainer=self.gaifo, module_ids=ids))
 
     def get_state(self, *args: Any, **kwargs: Any) -> dict[str, Any]:
         state = super().get_state(*args, **kwargs)  # type: ignore[misc]

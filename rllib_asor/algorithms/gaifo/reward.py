@@ -3,8 +3,8 @@
 D(s, s′) = σ(logit(s, s′)), expert transitions labelled 1. The policy's reward is GAIL's
 −log(1 − D(s, s′)) = softplus(logit) (`reward_form="gail"`, the form of `Ricky-Zhu/GARAT
 rl_gat/reinforcedgat.py` `ATPEnv.step`, there with a 1e-8 inside the log) or AIRL's
-log D − log(1 − D) = logit (`"airl"`). The loss is ASOR's class-balanced
-`discriminator_loss` (½ of the mean BCE of expert rows and of policy rows).
+log D − log(1 − D) = logit (`"airl"`). The loss is the class-balanced `discriminator_loss`
+(½ of the mean BCE of expert rows and of policy rows, ASOR's form).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from rllib_asor.asor.discriminator import discriminator_loss
+from rllib_asor.algorithms.gaifo.discriminator import discriminator_loss
 
 
 def transition_features(
@@ -42,7 +42,5 @@ def imitation_reward(logits: torch.Tensor, form: str = "gail") -> torch.Tensor:
 def gaifo_loss(
     expert_logits: torch.Tensor, policy_logits: torch.Tensor
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """½(BCE(expert, 1) + BCE(policy, 0)) and its statistics (ASOR's `discriminator_loss`)."""
-    logits = torch.cat([expert_logits, policy_logits])
-    labels = torch.cat([torch.ones_like(expert_logits), torch.zeros_like(policy_logits)])
-    return discriminator_loss(logits, labels)
+    """½(BCE(expert, 1) + BCE(policy, 0)) and its statistics (`discriminator_loss`)."""
+    return discriminator_loss(expert_logits, policy_logits)

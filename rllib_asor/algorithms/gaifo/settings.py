@@ -41,7 +41,7 @@ class GaifoSettings(Settings):
     grad_penalty: NonNegative = 0.0
     """Weight of the gradient penalty on expert inputs (0: none)."""
     input_norm: bool = True
-    """Normalise the discriminator's inputs by a running mean/std."""
+    """Normalise the discriminator's inputs by the expert rows' mean and std (fixed)."""
     reward_form: one_of(("gail", "airl")) = "gail"
     """gail: −log(1 − D(s, s′)); airl: log D − log(1 − D) (the logit)."""
     reward_scale: NonNegative = 1.0

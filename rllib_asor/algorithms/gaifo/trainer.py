@@ -14,9 +14,9 @@ import torch
 import torch.distributed as dist
 
 from rllib_asor.algorithms.common.demonstrations import Demonstrations
+from rllib_asor.algorithms.gaifo.discriminator import TransitionDiscriminator
 from rllib_asor.algorithms.gaifo.reward import gaifo_loss, imitation_reward, transition_features
 from rllib_asor.algorithms.gaifo.settings import GaifoSettings
-from rllib_asor.asor.discriminator import Discriminator
 
 
 class GaifoTrainer:
@@ -31,11 +31,11 @@ class GaifoTrainer:
         self.expert = transition_features(
             torch.as_tensor(demos.obs), torch.as_tensor(demos.next_obs), settings.state_dims
         ).to(self.device)
-        self.disc = Discriminator(
-            self.expert.shape[1], settings.disc_hiddens, input_norm=settings.input_norm
-        ).to(self.device)
+        self.disc = TransitionDiscriminator(self.expert.shape[1], settings.disc_hiddens).to(
+            self.device
+        )
         if settings.input_norm:
-            self.disc.observe(self.expert)  # once: the same on every Learner, never moved
+            self.disc.fit_normalizer(self.expert)  # once: the same on every Learner
         self.optim = torch.optim.Adam(self.disc.parameters(), lr=settings.disc_lr)
         self._rng = np.random.default_rng(settings.seed + 1000 * rank)
 
@@ -60,9 +60,9 @@ class GaifoTrainer:
                 real = self.expert[self._pick(self.expert.shape[0], n)]
                 loss, stats = gaifo_loss(self.disc(real), self.disc(fake))
                 if s.grad_penalty > 0:
-                    reg, reg_stats = self.disc.regularizer(real, s.grad_penalty, 0.0)
-                    loss = loss + reg
-                    stats = {**stats, **reg_stats}
+                    gp = self.disc.gradient_penalty(real)
+                    loss = loss + s.grad_penalty * gp
+                    stats = {**stats, "disc_grad_penalty": gp.detach()}
                 self.optim.zero_grad(set_to_none=False)
                 loss.backward()
                 _average_gradients(self.disc)

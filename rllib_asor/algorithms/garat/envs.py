@@ -18,9 +18,8 @@ import numpy as np
 
 
 def make_source(config: dict[str, Any]) -> gym.Env:
-    """The source env: `gym.make(config["env"], **config["env_config"])`."""
-    import rllib_asor  # noqa: F401  (registers our env ids)
-
+    """The source env: `gym.make(config["env"], **config["env_config"])` (importing
+    `rllib_asor` registered our env ids)."""
     return gym.make(config["env"], **dict(config.get("env_config") or {}))
 
 
