@@ -17,19 +17,28 @@ from rllib_asor.registry.envs import register_envs
 register_envs()
 
 if TYPE_CHECKING:
+    from rllib_asor.algorithms.bco.config import BcoConfig
     from rllib_asor.algorithms.escp.config import EscpConfig
+    from rllib_asor.algorithms.gaifo.config import GaifoConfig
+    from rllib_asor.algorithms.garat.config import GaratConfig
     from rllib_asor.algorithms.maple.maple import MapleConfig, MopoConfig
     from rllib_asor.algorithms.osi.config import OsiConfig
     from rllib_asor.algorithms.sac.config import FastSACConfig
+    from rllib_asor.algorithms.soil.config import SoilConfig, SoilOfflineConfig
     from rllib_asor.asor.config import AsorConfig
 
 __all__ = [
     "AsorConfig",
+    "BcoConfig",
     "EscpConfig",
     "FastSACConfig",
+    "GaifoConfig",
+    "GaratConfig",
     "MapleConfig",
     "MopoConfig",
     "OsiConfig",
+    "SoilConfig",
+    "SoilOfflineConfig",
     "with_asor",
     "with_dara",
 ]
@@ -88,4 +97,20 @@ def __getattr__(name: str) -> Any:
         from rllib_asor.algorithms.osi.config import OsiConfig
 
         return OsiConfig
+    if name == "GaifoConfig":  # GAIfO, imported on first use
+        from rllib_asor.algorithms.gaifo.config import GaifoConfig
+
+        return GaifoConfig
+    if name == "GaratConfig":  # GARAT, imported on first use
+        from rllib_asor.algorithms.garat.config import GaratConfig
+
+        return GaratConfig
+    if name == "BcoConfig":  # BCO, imported on first use
+        from rllib_asor.algorithms.bco.config import BcoConfig
+
+        return BcoConfig
+    if name in ("SoilConfig", "SoilOfflineConfig"):  # SOIL (online / offline), on first use
+        from rllib_asor.algorithms.soil import config as soil
+
+        return getattr(soil, name)
     raise AttributeError(f"module 'rllib_asor' has no attribute {name!r}")

@@ -61,13 +61,15 @@ def algorithm_class(exp: Experiment) -> type:
     try:
         with quiet():
             register_algorithms()  # ours: MAPLE, MOPO, ESCP, FastSAC, ...
-            return get_trainable_cls(exp.run)
+            cls = get_trainable_cls(exp.run)
     except Exception:
         raise UsageError(
             f"unknown algorithm {exp.run!r}; allowed: {', '.join(run_names())}",
             source=exp.source,
             key=f"{exp.name}.run",
         ) from None
+    offline = getattr(cls, "offline_variant", None)  # SOIL: MARWIL-based when given `input:`
+    return offline if offline is not None and exp.config.get("input") else cls
 
 
 def attr_name(key: str) -> str:

@@ -34,6 +34,24 @@ def check_offline_input(exp: Experiment) -> None:
         )
 
 
+def check_demonstrations(exp: Experiment) -> None:
+    """A `demonstrations:` path of an imitation block that does not exist fails here, before
+    Ray starts (relative paths: from the working directory, where Tune starts)."""
+    for key in DEMONSTRATION_KEYS:
+        given = _demonstrations_path(exp, key)
+        if given and not os.path.exists(given):
+            from rllib_asor.algorithms.common.demonstrations import ALLOWED
+
+            hint = (
+                "; make the offline datasets first: `make datasets`" if "offline" in given else ""
+            )
+            raise UsageError(
+                f"demonstrations {given} do not exist{hint}; {ALLOWED}",
+                source=exp.source,
+                key=f"{exp.name}.config.{key.removesuffix('_settings')}.demonstrations",
+            )
+
+
 def tiny_test_data(exp: Experiment) -> None:
     """--test on a fresh clone: stand-ins for the missing datasets, in a temporary folder."""
     from rllib_asor.data.format import DYNAMICS, QUALITIES
@@ -45,6 +63,8 @@ def tiny_test_data(exp: Experiment) -> None:
     ]
     if not missing:
         return
+    demos = _missing_demonstrations(exp, missing)
+    missing += [p for parts, _ in demos.values() for p in parts if p not in missing]
     import atexit
     import shutil
     import tempfile
@@ -64,7 +84,47 @@ def tiny_test_data(exp: Experiment) -> None:
     exp.config["input"] = (
         [swap.get(p, p) for p in value] if isinstance(value, list) else swap.get(value, value)
     )
+    for key, (parts, whole_task) in demos.items():  # the stand-in task dir or part
+        stand_in = Path(swap[parts[0]])
+        path = stand_in.parent.parent if whole_task else stand_in
+        exp.config[key] = {**exp.config[key], "demonstrations": str(path)}
     exp.warnings.append(
         f"--test: trained on tiny stand-in datasets in {tmp} (deleted at exit); "
         "for real runs make the data first: `make datasets`"
     )
+
+
+DEMONSTRATION_KEYS = ("bco_settings", "soil_settings", "gaifo_settings")
+"""Config keys of the blocks whose `demonstrations:` may name a `rllib data collect` dataset."""
+
+
+def _demonstrations_path(exp: Experiment, key: str) -> str:
+    block = exp.config.get(key)
+    path = block.get("demonstrations") if isinstance(block, dict) else None
+    return path if isinstance(path, str) else ""
+
+
+def _missing_demonstrations(
+    exp: Experiment, inputs: list[str]
+) -> dict[str, tuple[list[str], bool]]:
+    """{block key: (the dataset parts its missing `demonstrations:` needs, whether it names the
+    whole task dir)} for blocks whose demonstrations are a part (`.../hopper/original/expert`)
+    or the task dir of the missing inputs (`.../hopper`: the expert level of the inputs'
+    dynamics); made beside the inputs' stand-ins under --test."""
+    from rllib_asor.data.format import DYNAMICS, QUALITIES
+
+    out: dict[str, tuple[list[str], bool]] = {}
+    dynamics = sorted({Path(p).parent.name for p in inputs})
+    roots = {Path(p).parent.parent: dynamics for p in inputs}
+    for key in DEMONSTRATION_KEYS:
+        given = _demonstrations_path(exp, key)
+        if not given:
+            continue
+        path = Path(given) if os.path.isabs(given) else Path.cwd() / given
+        if path.exists():
+            continue
+        if path.parent.name in DYNAMICS and path.name in QUALITIES:
+            out[key] = ([str(path)], False)
+        elif path in roots:
+            out[key] = ([str(path / d / "expert") for d in roots[path]], True)
+    return out

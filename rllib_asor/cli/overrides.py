@@ -40,6 +40,22 @@ TEST_MAPLE = {
 }
 """`--test` budget of MAPLE/MOPO (`maple:` block): a few steps, no ensemble cache."""
 
+TEST_GARAT = {"grounding_iterations": 1, "grounding_batch_size": TEST_BATCH}
+"""`--test` budget of GARAT's grounding (`garat:` block): one small iteration."""
+
+TEST_BCO = {
+    "pre_demo_steps": TEST_BATCH,
+    "idm_steps": 10,
+    "bc_epochs": 1,
+    "evaluation_interval": 1,
+    "evaluation_episodes": 1,
+}
+"""`--test` budget of BCO (`bco:` block): a few steps; offline it evaluates every iteration."""
+
+TEST_SOIL = {"idm_steps": 10, "evaluation_interval": 1, "evaluation_episodes": 1}
+"""`--test` budget of SOIL's inverse dynamics model (`soil:` block); offline it evaluates every
+iteration."""
+
 
 def parse_stop_flags(items: list[str] | None) -> dict[str, Any]:
     """`--stop KEY=VALUE` (repeatable) -> {key: number}, legacy names translated."""
@@ -107,7 +123,15 @@ def apply_overrides(
         cfg["train_batch_size"] = TEST_BATCH
         if exp.run in ("MAPLE", "MOPO"):
             cfg[MAPLE_KEY] = {**(cfg.get(MAPLE_KEY) or {}), **TEST_MAPLE}
-        if exp.run.upper() in ("PPO", "APPO", "IMPALA"):
+        if exp.run == "GARAT":
+            cfg["garat_settings"] = {**(cfg.get("garat_settings") or {}), **TEST_GARAT}
+        if exp.run == "BCO":
+            cfg["bco_settings"] = {**(cfg.get("bco_settings") or {}), **TEST_BCO}
+        if exp.run == "SOIL":
+            cfg["soil_settings"] = {**(cfg.get("soil_settings") or {}), **TEST_SOIL}
+        if exp.run.upper() in ("PPO", "APPO", "IMPALA", "GAIFO", "GARAT") or (
+            exp.run == "SOIL" and not offline
+        ):
             cfg["minibatch_size"] = TEST_MINIBATCH
             cfg["num_epochs"] = 1
         if "rollout_fragment_length" in cfg:

@@ -60,7 +60,7 @@ class ExperimentSpec(BaseModel):
     config: dict[str, Any] = {}
     """The AlgorithmConfig settings by name (old names are translated with a warning), any
     value may be `{grid_search: [...]}`; our own blocks: `asor:`, `escp:`, `maple:`, `dara:`, `osi:`,
-    `cadm:`."""
+    `cadm:`, `gaifo:`, `garat:`, `bco:`, `soil:`."""
     checkpoint_config: CheckpointSettings = CheckpointSettings()
     """When checkpoints are saved and how many are kept."""
     num_samples: Annotated[int, Field(ge=1), Allowed("an integer >= 1")] = 1
@@ -108,6 +108,18 @@ SETTINGS_BLOCKS: dict[str, SettingsBlock] = {
     ),
     "cadm": SettingsBlock(
         "rllib_asor.algorithms.cadm.settings:CadmSettings", ("CaDM",), "cadm_settings"
+    ),
+    "gaifo": SettingsBlock(
+        "rllib_asor.algorithms.gaifo.settings:GaifoSettings", ("GAIfO",), "gaifo_settings"
+    ),
+    "garat": SettingsBlock(
+        "rllib_asor.algorithms.garat.settings:GaratSettings", ("GARAT",), "garat_settings"
+    ),
+    "bco": SettingsBlock(
+        "rllib_asor.algorithms.bco.settings:BcoSettings", ("BCO",), "bco_settings"
+    ),
+    "soil": SettingsBlock(
+        "rllib_asor.algorithms.soil.settings:SoilSettings", ("SOIL",), "soil_settings"
     ),
 }
 """Our `config:` blocks by name; validate.py checks each, `rllib schema` describes each."""

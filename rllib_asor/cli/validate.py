@@ -7,7 +7,7 @@ from typing import Any
 from rllib_asor.cli import grid
 from rllib_asor.cli.build import algorithm_class, build_algo_config
 from rllib_asor.cli.errors import Problems, UsageError, one_line, quiet
-from rllib_asor.cli.offline_inputs import check_offline_input
+from rllib_asor.cli.offline_inputs import check_demonstrations, check_offline_input
 from rllib_asor.cli.overrides import checkpoint_kwargs
 from rllib_asor.cli.spec import SETTINGS_BLOCKS, Experiment
 from rllib_asor.cli.stop_keys import check_stop, require_stop
@@ -234,6 +234,7 @@ def validate(exp: Experiment) -> Any:
     first-point config."""
     problems = Problems()
     problems.passed(check_offline_input, exp)
+    problems.passed(check_demonstrations, exp)
     buildable = _check_blocks(exp, problems)
     problems.passed(validate_env, exp)  # before the configs: it may rename the env
     cfg = _check_configs(exp, problems, buildable)

@@ -17,6 +17,10 @@ ALGORITHMS = {
     "OSI": "rllib_asor.algorithms.osi.config:OSI",  # universal policy + system identification
     "CaDM": "rllib_asor.algorithms.cadm.config:CaDM",  # context-aware dynamics model (model-free)
     "FastSAC": "rllib_asor.algorithms.sac.config:FastSAC",  # SAC on the fast off-policy path
+    "GAIfO": "rllib_asor.algorithms.gaifo.config:GAIfO",  # adversarial imitation from observation
+    "GARAT": "rllib_asor.algorithms.garat.config:GARAT",  # grounded action transformation
+    "BCO": "rllib_asor.algorithms.bco.config:BCO",  # behavioural cloning from observation
+    "SOIL": "rllib_asor.algorithms.soil.config:SOIL",  # PPO + IDM-inferred imitation term
 }
 """Run name → "module:Class"."""
 

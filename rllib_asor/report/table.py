@@ -3,8 +3,9 @@ that differ in the seed only) as columns, each cell the mean score over seeds ±
 of its 95 % bootstrap interval (`stats.bootstrap_ci`) and the seed count, the best mean of a row
 in bold (markdown). Scores as `rllib compare` reads them (`scores.choose_source` per env); a
 method without a finite score that way (MAPLE and MOPO evaluate themselves, outside RLlib's
-evaluation env runners) is scored by its own evaluation (`OWN_EVALUATION`). Under the table,
-which score each column shows."""
+evaluation env runners) is scored by its own evaluation (`OWN_EVALUATION`), any other method
+without a score that way by the best score its own trials have (e.g. the training return beside
+GARAT, which alone evaluates, in its target). Under the table, which score each column shows."""
 
 from __future__ import annotations
 
@@ -24,18 +25,20 @@ OWN_EVALUATION = (
     Source(
         "maple-evaluation",
         "evaluation/mean/normalized_score",
-        "D4RL-normalised score of MAPLE's own evaluation (greedy, each dynamics of the data, "
-        "their mean; `evaluation/mean/normalized_score`, last value)",
+        "D4RL-normalised score of its own evaluation (MAPLE family, BCO, SOIL; greedy, each "
+        "dynamics of the data, their mean; `evaluation/mean/normalized_score`, last value)",
     ),
     Source(
         "maple-evaluation",
         "evaluation/mean/return_mean",
-        "return of MAPLE's own evaluation (greedy, each dynamics of the data, their mean; "
-        "`evaluation/mean/return_mean`, last value; the data has no reference returns)",
+        "return of its own evaluation (MAPLE family, BCO, SOIL; greedy, each dynamics of the "
+        "data, their mean; `evaluation/mean/return_mean`, last value; the data has no reference "
+        "returns)",
     ),
 )
-"""Scores of methods that evaluate themselves (MAPLE, MOPO and their +DARA/+ASOR), in order of
-preference: the first that every trial of the group has."""
+"""Scores of methods that evaluate themselves (MAPLE, MOPO and their +DARA/+ASOR; offline BCO
+and SOIL log the same keys), in order of preference: the first that every trial of the group
+has."""
 
 
 def _scores(trials: list[Trial], source: Source, last_n: int) -> list[float]:
@@ -64,6 +67,8 @@ def table_cells(
         for g in mine:
             used, values = source, _scores(g.trials, source, last_n)
             own = None if metric or values else _own_source(g.trials)
+            if own is None and not metric and not values:  # e.g. only GARAT evaluates in its
+                own = choose_source(g.trials)  # target: the others keep their own score
             if own is not None:
                 used, values = own, _scores(g.trials, own, last_n)
             cells[(env, g.label)] = values

@@ -107,7 +107,7 @@ def test_offline_methods_are_scored_by_their_own_evaluation_and_dara_is_a_method
     text = render_table(envs, labels, cells, sources)
     row = next(line for line in text.splitlines() if line.startswith(f"| {env}"))
     assert row.startswith(f"| {env} | — | 11.5 ± ") and "**31.5 ± " in row
-    assert "- MAPLE, MAPLE+DARA: return of MAPLE's own evaluation" in text
+    assert "- MAPLE, MAPLE+DARA: return of its own evaluation" in text
 
 
 def test_a_method_with_rllib_evaluation_keeps_it_beside_a_self_evaluating_one(tmp_path):

@@ -1,0 +1,68 @@
+"""`GaifoSettings`: GAIfO's own settings (the YAML `gaifo:` block, `GaifoConfig.gaifo(...)`).
+
+A bad value raises ValueError naming the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Annotated, Any, ClassVar
+
+from pydantic import Field
+
+from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
+from rllib_asor.settings_model import Allowed, Settings, one_of
+
+
+class GaifoSettings(Settings):
+    """GAIfO's settings."""
+
+    model_config = {"frozen": True}
+    block: ClassVar[str] = "gaifo"
+    label: ClassVar[str] = "a GAIfO"
+    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
+
+    demonstrations: Annotated[
+        str | None, Allowed("a path: an .npz of state-only demonstrations or a dataset dir")
+    ] = None
+    """State-only expert transitions (`rllib_asor.algorithms.common.demonstrations`)."""
+    disc_hiddens: Annotated[
+        tuple[Annotated[int, Field(ge=1)], ...],
+        Field(min_length=1, strict=False),
+        Allowed("a non-empty list of positive ints"),
+    ] = (64, 64)
+    """The discriminator's hidden ReLU layers."""
+    disc_lr: Positive = 1e-3
+    """Adam lr of the discriminator."""
+    disc_steps: IntAtLeast1 = 5
+    """Discriminator gradient steps per training iteration."""
+    disc_batch_size: IntAtLeast1 = 256
+    """Policy transitions per discriminator step (as many expert ones)."""
+    grad_penalty: NonNegative = 0.0
+    """Weight of the gradient penalty on expert inputs (0: none)."""
+    input_norm: bool = True
+    """Normalise the discriminator's inputs by the expert rows' mean and std (fixed)."""
+    reward_form: one_of(("gail", "airl")) = "gail"
+    """gail: −log(1 − D(s, s′)); airl: log D − log(1 − D) (the logit)."""
+    reward_scale: NonNegative = 1.0
+    """Factor on the discriminator's reward."""
+    env_reward_weight: NonNegative = 0.0
+    """Factor on the env's reward added to it (0: pure imitation, as the paper)."""
+    state_dims: Annotated[
+        Annotated[int, Field(ge=1)] | None, Allowed("null or an int ≥ 1")
+    ] = None
+    """The discriminator reads the first `state_dims` observation features (None: all)."""
+    seed: int = 0
+    """Seed of the expert-row sampling."""
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any] | GaifoSettings | None) -> GaifoSettings:
+        """Settings from a dict (the `gaifo:` block); unknown keys and bad values raise
+        ValueError."""
+        if d is None:
+            return cls()
+        if isinstance(d, GaifoSettings):
+            return d
+        if not isinstance(d, Mapping):
+            raise ValueError(f"gaifo={d!r} is not allowed; expected a mapping of GAIfO settings")
+        return cls(**d)

@@ -1,0 +1,83 @@
+"""`GaratSettings`: GARAT's own settings (the YAML `garat:` block, `GaratConfig.garat(...)`).
+
+Defaults follow the authors' scripts (`Ricky-Zhu/GARAT train_garat.sh`, `reinforcedgat.py`)
+where they have one: `ACTION_TF_RATIO = 2`, `--disc_lr 3e-3`, `--atp_lr 3e-4`, `--loss_function
+GAIL`, GroundedEnv's `alpha = 1`. A bad value raises ValueError naming the key, the value and
+what is allowed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Annotated, Any, ClassVar
+
+from pydantic import Field
+
+from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
+from rllib_asor.settings_model import Allowed, Settings
+
+
+class GaratSettings(Settings):
+    """GARAT's settings."""
+
+    model_config = {"frozen": True}
+    block: ClassVar[str] = "garat"
+    label: ClassVar[str] = "a GARAT"
+    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
+
+    demonstrations: Annotated[
+        str | None, Allowed("a path: an .npz of state-only target transitions or a dataset dir")
+    ] = None
+    """The target's transitions, recorded by the behaviour policy (`behaviour_policy`)."""
+    behaviour_policy: Annotated[
+        str | None, Allowed("null or a checkpoint path (an Algorithm's or an RLModule's)")
+    ] = None
+    """The grounding's behaviour policy: a checkpoint whose deterministic action plays a_t, as
+    the authors' initial policy π₀ (the target data must be its rollouts in the target); None:
+    uniformly random actions (the target data recorded with random actions)."""
+    target_env_config: Annotated[
+        dict[str, Any] | None, Allowed("null or a mapping (the target env's env_config)")
+    ] = None
+    """env_config of the target env (the evaluation env); None: evaluate in the source."""
+    grounding_iterations: IntAtLeast1 = 20
+    """PPO iterations of the action transformer (GAIfO on the grounding MDP)."""
+    grounding_batch_size: IntAtLeast1 = 2000
+    """Grounding-MDP steps per grounding iteration."""
+    transformer_hiddens: Annotated[
+        tuple[Annotated[int, Field(ge=1)], ...],
+        Field(min_length=1, strict=False),
+        Allowed("a non-empty list of positive ints"),
+    ] = (64, 64)
+    """Hidden layers of the transformer's policy and value networks."""
+    transformer_lr: Positive = 3e-4
+    """Adam lr of the transformer's PPO (`--atp_lr`)."""
+    action_tf_ratio: Positive = 2.0
+    """|Δ| ≤ ratio · half the action range (`ACTION_TF_RATIO`)."""
+    alpha: NonNegative = 1.0
+    """The grounded env plays clip(a + alpha·Δ(s, a)) (GroundedEnv's `alpha`)."""
+    disc_hiddens: Annotated[
+        tuple[Annotated[int, Field(ge=1)], ...],
+        Field(min_length=1, strict=False),
+        Allowed("a non-empty list of positive ints"),
+    ] = (64, 64)
+    """The discriminator's hidden ReLU layers."""
+    disc_lr: Positive = 3e-3
+    """Adam lr of the discriminator (`--disc_lr`)."""
+    disc_steps: IntAtLeast1 = 5
+    """Discriminator gradient steps per grounding iteration."""
+    grad_penalty: NonNegative = 1.0
+    """Gradient penalty on target inputs (`--compute_grad_penalty`)."""
+    seed: int = 0
+    """Seed of the grounding run (its env, behaviour actions and networks)."""
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any] | GaratSettings | None) -> GaratSettings:
+        """Settings from a dict (the `garat:` block); unknown keys and bad values raise
+        ValueError."""
+        if d is None:
+            return cls()
+        if isinstance(d, GaratSettings):
+            return d
+        if not isinstance(d, Mapping):
+            raise ValueError(f"garat={d!r} is not allowed; expected a mapping of GARAT settings")
+        return cls(**d)

@@ -1,0 +1,299 @@
+"""GAIfO on the lava world and GARAT on a grounded Pendulum (README.md beside this file).
+
+    python studies/ifo_online_check/run.py gaifo    # then: ... run.py garat
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import rllib_asor  # noqa: F401  (registers our env ids)
+from rllib_asor.algorithms.common.demonstrations import (
+    rollout_demonstrations,
+    save_demonstrations,
+)
+from rllib_asor.evaluation.rollout import module_policy, stack_obs
+
+HERE = Path(__file__).parent
+RESULTS = HERE / "results.json"
+LAVA = {"obs_mode": "onehot", "layout": "B"}
+SEEDS = (0, 1)
+
+
+def _save(key: str, value: object) -> None:
+    data = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    data[key] = value
+    RESULTS.write_text(json.dumps(data, indent=1))
+
+
+# ----------------------------------------------------------------------------- GAIfO
+def lava_expert():
+    from rllib_asor.envs.lava import GRID_SIZE, best_reactive_policy
+
+    table = best_reactive_policy("B")
+
+    def act(obs):
+        row, col = int(np.argmax(obs[:GRID_SIZE])), int(np.argmax(obs[GRID_SIZE : 2 * GRID_SIZE]))
+        return table[(row, col, bool(obs[-1] > 0.5))]
+
+    return act
+
+
+def lava_score(act, episodes_per_row: int = 1, seed: int = 0) -> float:
+    env = gym.make("rllib_asor/LavaWorld-v0", **LAVA)
+    total, n = 0.0, 0
+    for k in (2, 3, 4, 5):
+        for i in range(episodes_per_row):
+            obs, _ = env.reset(seed=seed + i, options={"lava_row": k})
+            done, ret = False, 0.0
+            while not done:
+                obs, r, term, trunc, _ = env.step(act(obs))
+                ret, done = ret + r, term or trunc
+            total, n = total + ret, n + 1
+    return total / n
+
+
+def gaifo(reward_form: str = "gail") -> None:
+    from rllib_asor.algorithms.gaifo.config import GaifoConfig
+
+    tag = "gaifo" if reward_form == "gail" else f"gaifo_{reward_form}"
+
+    demos = rollout_demonstrations(lava_expert(), "rllib_asor/LavaWorld-v0", 40, env_kwargs=LAVA)
+    path = HERE / "lava-expert.npz"
+    save_demonstrations(path, demos)
+    rng = np.random.default_rng(0)
+    random_score = lava_score(lambda o: int(rng.integers(4)), episodes_per_row=100)
+    _save("gaifo/random", random_score)
+    _save("gaifo/expert", lava_score(lava_expert()))
+    for seed in SEEDS:
+        config = (
+            GaifoConfig()
+            .environment("rllib_asor/LavaWorld-v0", env_config=LAVA)
+            .env_runners(num_env_runners=0, num_envs_per_env_runner=4)
+            .training(
+                lr=0.0005, gamma=0.99, lambda_=0.95, entropy_coeff=0.01,
+                train_batch_size=2000, minibatch_size=256, num_epochs=6,
+            )
+            .rl_module(model_config={"fcnet_hiddens": [64, 64]})
+            .gaifo(demonstrations=str(path), seed=seed, reward_form=reward_form)
+            .debugging(seed=seed)
+        )
+        algo, t0 = config.build_algo(), time.time()
+        try:
+            while True:
+                result = algo.train()
+                if result["num_env_steps_sampled_lifetime"] >= 40_000:
+                    break
+            policy = module_policy(algo.get_module())
+            score = lava_score(lambda o, p=policy: int(p(stack_obs([o]), None)[0]))
+            row = {
+                "score": score,
+                "env_steps": int(result["num_env_steps_sampled_lifetime"]),
+                "disc": {k: float(v) for k, v in result["learners"]["gaifo"].items()},
+                "wall_s": round(time.time() - t0, 1),
+            }
+        finally:
+            algo.stop()
+        print(f"GAIfO ({reward_form}) seed {seed}: {row}")
+        _save(f"{tag}/seed{seed}", row)
+
+
+# ----------------------------------------------------------------------------- GARAT
+SOURCE, TARGET = {"g": 10.0}, {"g": 12.0}
+
+
+def pendulum_ppo(config):
+    from ray.rllib.connectors.env_to_module.mean_std_filter import MeanStdFilter
+
+    return (
+        config.env_runners(
+            num_env_runners=0,
+            num_envs_per_env_runner=4,
+            env_to_module_connector=lambda env, spaces=None, device=None: MeanStdFilter(),
+        )
+        .training(
+            lr=0.0003, gamma=0.95, lambda_=0.1, train_batch_size=512, minibatch_size=64,
+            num_epochs=6, vf_clip_param=10.0,
+        )
+        .rl_module(model_config={"fcnet_activation": "relu"})
+        .evaluation(evaluation_duration=20, evaluation_duration_unit="episodes",
+                    evaluation_config={"explore": False})
+    )
+
+
+def train_and_score(config, steps: int = 60_000) -> dict:
+    algo, t0 = config.build_algo(), time.time()
+    try:
+        while True:
+            result = algo.train()
+            if result["num_env_steps_sampled_lifetime"] >= steps:
+                break
+        target = algo.evaluate()["env_runners"]["episode_return_mean"]
+        grounded = getattr(algo.config, "garat_grounded", None)
+        return {
+            "target_return": float(target),
+            "source_train_return": float(result["env_runners"]["episode_return_mean"]),
+            "wall_s": round(time.time() - t0, 1),
+            "transformer": None if grounded is None else grounded["transformer"],
+            "grounding": None if grounded is None else grounded["stats"],
+        }
+    finally:
+        algo.stop()
+
+
+def grounding_gap(transformer, n: int = 2000, seed: int = 0) -> dict:
+    from rllib_asor.algorithms.garat.envs import GroundedEnv
+
+    rng = np.random.default_rng(seed)
+    target = gym.make("Pendulum-v1", **TARGET).unwrapped
+    source = gym.make("Pendulum-v1", **SOURCE).unwrapped
+    grounded = GroundedEnv({"env": "Pendulum-v1", "env_config": SOURCE, "transformer": transformer})
+    for e in (target, source, grounded):
+        e.reset(seed=seed)
+    plain, fixed = [], []
+    for _ in range(n):
+        th, thdot, a = rng.uniform(-np.pi, np.pi), rng.uniform(-8, 8), rng.uniform(-2, 2, 1)
+        nxt = []
+        for e in (target, source):
+            e.state = np.array([th, thdot])
+            nxt.append(e.step(a.astype(np.float32))[0][2])
+        grounded.env.unwrapped.state = np.array([th, thdot])
+        grounded._s = np.array([np.cos(th), np.sin(th), thdot], np.float32)
+        g = grounded.step(a.astype(np.float32))[0][2]
+        plain.append(abs(nxt[1] - nxt[0]))
+        fixed.append(abs(g - nxt[0]))
+    return {"plain_gap": float(np.mean(plain)), "grounded_gap": float(np.mean(fixed))}
+
+
+def garat() -> None:
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    from rllib_asor.algorithms.garat.config import GaratConfig
+
+    rng = np.random.default_rng(0)
+    demos = rollout_demonstrations(
+        lambda o: rng.uniform(-2, 2, 1).astype(np.float32), "Pendulum-v1", 40, env_kwargs=TARGET
+    )
+    path = HERE / "pendulum-g12-random.npz"
+    save_demonstrations(path, demos)
+    env = gym.make("Pendulum-v1", **TARGET)
+    rets = []
+    for i in range(20):
+        env.reset(seed=i)
+        done, ret = False, 0.0
+        while not done:
+            _, r, term, trunc, _ = env.step(rng.uniform(-2, 2, 1).astype(np.float32))
+            ret, done = ret + r, term or trunc
+        rets.append(ret)
+    _save("garat/random_target", float(np.mean(rets)))
+    for seed in SEEDS:
+        cfg = pendulum_ppo(
+            GaratConfig()
+            .environment("Pendulum-v1", env_config=SOURCE)
+            .garat(demonstrations=str(path), target_env_config=TARGET, seed=seed,
+                   grounding_iterations=30, grounding_batch_size=2000)
+            .debugging(seed=seed)
+        )
+        row = train_and_score(cfg)
+        row["gap"] = grounding_gap(row.pop("transformer"), seed=seed)
+        print(f"GARAT seed {seed}: {row}")
+        _save(f"garat/seed{seed}", row)
+        plain = pendulum_ppo(
+            PPOConfig()
+            .environment("Pendulum-v1", env_config=SOURCE)
+            .evaluation(evaluation_config={"env_config": TARGET, "explore": False})
+            .debugging(seed=seed)
+        )
+        row = train_and_score(plain)
+        row.pop("transformer"), row.pop("grounding")
+        print(f"PPO (plain source) seed {seed}: {row}")
+        _save(f"ppo_source/seed{seed}", row)
+
+
+def pendulum_pi0(obs: np.ndarray, g: float = 10.0) -> np.ndarray:
+    """π₀: energy-pumping swing-up, PD balance near the top (deterministic)."""
+    c, s, thdot = (float(x) for x in obs)
+    if c > 0.85:
+        return np.clip([-(10.0 * np.arctan2(s, c) + 2.0 * thdot)], -2, 2).astype(np.float32)
+    if abs(thdot) < 1e-3:
+        return np.array([1.0], np.float32)
+    energy = 0.5 * thdot**2 + 1.5 * g * c
+    return np.clip([0.5 * thdot * (1.5 * g - energy)], -2, 2).astype(np.float32)
+
+
+def _returns(env, act, episodes: int = 20) -> float:
+    rets = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=i)
+        done, ret = False, 0.0
+        while not done:
+            obs, r, term, trunc, _ = env.step(act(obs))
+            ret, done = ret + r, term or trunc
+        rets.append(ret)
+    return float(np.mean(rets))
+
+
+def garat_pi0(disc_steps: str = "5") -> None:
+    """Run 2 (run 3: `disc_steps` 50): the grounding under a deterministic π₀ (README.md)."""
+    from rllib_asor.algorithms.common.demonstrations import load_demonstrations
+    from rllib_asor.algorithms.garat.envs import GroundedEnv
+    from rllib_asor.algorithms.garat.grounding import ground
+    from rllib_asor.algorithms.garat.settings import GaratSettings
+
+    path = HERE / "pendulum-g12-pi0.npz"
+    save_demonstrations(
+        path, rollout_demonstrations(pendulum_pi0, "Pendulum-v1", 20, env_kwargs=TARGET)
+    )
+    demos = load_demonstrations(path, gym.make("Pendulum-v1").observation_space)
+    _save("garat_pi0/pi0", {
+        "target": _returns(gym.make("Pendulum-v1", **TARGET), pendulum_pi0),
+        "source": _returns(gym.make("Pendulum-v1", **SOURCE), pendulum_pi0),
+    })
+    rng = np.random.default_rng(0)
+    rows = rng.choice(len(demos), 2000, replace=False)
+    for seed in SEEDS:
+        t0 = time.time()
+        settings = GaratSettings(
+            grounding_iterations=30, grounding_batch_size=2000, seed=seed,
+            disc_steps=int(disc_steps),
+        )
+        transformer, stats = ground("Pendulum-v1", SOURCE, settings, str(path), pendulum_pi0)
+        target = gym.make("Pendulum-v1", **TARGET).unwrapped
+        source = gym.make("Pendulum-v1", **SOURCE).unwrapped
+        cfg = {"env": "Pendulum-v1", "env_config": SOURCE, "transformer": transformer}
+        grounded = GroundedEnv(cfg)
+        for e in (target, source, grounded):
+            e.reset(seed=seed)
+        plain, fixed = [], []
+        for obs in demos.obs[rows]:
+            th, thdot = float(np.arctan2(obs[1], obs[0])), float(obs[2])
+            a = pendulum_pi0(obs)
+            nxt = []
+            for e in (target, source):
+                e.state = np.array([th, thdot])
+                nxt.append(e.step(a)[0][2])
+            grounded.env.unwrapped.state = np.array([th, thdot])
+            grounded._s = obs.astype(np.float32)
+            g = grounded.step(a)[0][2]
+            plain.append(abs(nxt[1] - nxt[0]))
+            fixed.append(abs(g - nxt[0]))
+        row = {
+            "plain_gap": float(np.mean(plain)),
+            "grounded_gap": float(np.mean(fixed)),
+            "pi0_in_grounded": _returns(GroundedEnv(cfg), pendulum_pi0),
+            "grounding": stats,
+            "wall_s": round(time.time() - t0, 1),
+        }
+        tag = "garat_pi0" if disc_steps == "5" else f"garat_pi0_disc{disc_steps}"
+        print(f"GARAT pi0 ({disc_steps} D steps) seed {seed}: {row}")
+        _save(f"{tag}/seed{seed}", row)
+
+
+if __name__ == "__main__":
+    {"gaifo": gaifo, "garat": garat, "garat_pi0": garat_pi0}[sys.argv[1]](*sys.argv[2:])
