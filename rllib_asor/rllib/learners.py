@@ -89,7 +89,11 @@ class AsorLearnerMixin:
         super().build()  # type: ignore[misc]
         self.asor = AsorConfig.from_dict(self.config.learner_config_dict.get("asor"))
         self._asor_timestep = 0.0
-        ids = {pid: asor_module_id(pid) for pid in self.module.keys() if asor_module_id(pid) in self.module}
+        ids = {
+            pid: asor_module_id(pid)
+            for pid in self.module.keys()
+            if asor_module_id(pid) in self.module
+        }
         if not ids:
             raise ValueError(
                 "ASOR learner: no ASOR module found in the MultiRLModule; "
@@ -117,7 +121,10 @@ class AsorLearnerMixin:
         """The ASOR piece on a train batch that bypassed the Learner connector (the fast
         off-policy path's flat batches, offline dataset batches, MAPLE's batches)."""
         return self._asor_piece(
-            rl_module=self.module, batch=batch, episodes=None, metrics=self.metrics,
+            rl_module=self.module,
+            batch=batch,
+            episodes=None,
+            metrics=self.metrics,
             aux_rows=aux_rows,
         )
 
