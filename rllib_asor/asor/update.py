@@ -132,7 +132,9 @@ def concat_batches(batches: Sequence[AsorBatch]) -> AsorBatch:
     offset = 0
     for b in batches:
         if ranked is not None:
-            rows = b.ranked if b.ranked is not None else torch.arange(b.features.shape[0])
+            rows = b.ranked
+            if rows is None:
+                rows = torch.arange(b.features.shape[0], device=b.features.device)
             ranked.append(rows.to(b.features.device) + offset)
         if b.chunks is None or chunks is None:
             chunks = None

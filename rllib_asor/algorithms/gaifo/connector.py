@@ -40,7 +40,7 @@ class GaifoRewardPiece(ConnectorV2):
 
     def __call__(self, *, rl_module: Any, batch: dict, metrics: Any = None, **kwargs: Any) -> Any:
         rows = [self._relabel(batch[mid]) for mid in self.module_ids if mid in batch]
-        feats = torch.cat(rows) if rows else torch.zeros(0, self.trainer.expert.shape[1])
+        feats = torch.cat(rows) if rows else torch.zeros(0, self.trainer.expert.shape[1], device=self.trainer.device)
         stats = self.trainer.update(feats.to(self.trainer.device))
         if metrics is not None and stats:
             metrics.log_dict(stats, key=METRICS_KEY, window=1)

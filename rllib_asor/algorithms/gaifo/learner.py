@@ -64,7 +64,7 @@ class GaifoLearnerMixin:
             resolve_path(settings.demonstrations), demonstration_space(space, settings)
         )
         rank = dist.get_rank() if dist.is_available() and dist.is_initialized() else 0
-        self.gaifo = GaifoTrainer(settings, demos, self._device, rank)  # type: ignore[attr-defined]
+        self.gaifo = GaifoTrainer(settings, demos, self.device, rank)  # type: ignore[attr-defined]
         pipeline = compat.learner_connector(self)
         if pipeline is None:
             raise ValueError(

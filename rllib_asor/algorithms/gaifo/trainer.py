@@ -29,7 +29,9 @@ class GaifoTrainer:
         self.settings = settings
         self.device = torch.device(device)
         self.expert = transition_features(
-            torch.as_tensor(demos.obs), torch.as_tensor(demos.next_obs), settings.state_dims
+            torch.as_tensor(demos.obs, device=self.device),
+            torch.as_tensor(demos.next_obs, device=self.device),
+            settings.state_dims,
         ).to(self.device)
         self.disc = TransitionDiscriminator(self.expert.shape[1], settings.disc_hiddens).to(
             self.device

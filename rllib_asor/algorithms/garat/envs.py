@@ -119,10 +119,14 @@ class Transformer:
         import torch
         from ray.rllib.core.columns import Columns
 
-        x = torch.as_tensor(np.concatenate([obs, action]), dtype=torch.float32)[None]
+        from rllib_asor.devices import module_device
+
+        x = torch.as_tensor(
+            np.concatenate([obs, action]), dtype=torch.float32, device=module_device(self.module)
+        )[None]
         with torch.no_grad():
             out = self.module.forward_inference({Columns.OBS: x})[Columns.ACTION_DIST_INPUTS]
-        return np.clip(out[0, : self.dim].numpy(), self.low, self.high)
+        return np.clip(out[0, : self.dim].cpu().numpy(), self.low, self.high)
 
 
 class GroundedEnv(gym.Wrapper):

@@ -59,8 +59,8 @@ class SoilLearnerMixin:
             demos,
             policy.action_space,
             batch,
-            self._device,
-            rank,  # type: ignore[attr-defined]
+            self.device,  # type: ignore[attr-defined]
+            rank,
         )
         parts = offline_parts(self.config)  # type: ignore[attr-defined]
         if parts:
