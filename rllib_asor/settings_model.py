@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import difflib
 import typing
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Annotated, Any, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 
 @dataclass(frozen=True)
@@ -83,6 +83,34 @@ class Settings(BaseModel):
     def to_dict(self) -> dict[str, Any]:
         """Plain-dict form (what RLlib configs store and `from_dict` reads back)."""
         return self.model_dump(mode="json")
+
+
+class BlockSettings(Settings):
+    """An algorithm's own frozen settings block (`escp:`, `osi:`, `bco:`, ...), read by
+    `from_dict`; `label` is "a BCO" / "an OSI"."""
+
+    model_config = ConfigDict(frozen=True)
+    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any] | Self | None) -> Self:
+        """Settings from a dict (the YAML block); a non-mapping, unknown keys and bad values
+        raise ValueError in one line."""
+        if d is None:
+            return cls()
+        if isinstance(d, cls):
+            return d
+        if not isinstance(d, Mapping):
+            name = cls.label.split(" ", 1)[-1]
+            raise ValueError(
+                f"{cls.block}={d!r} is not allowed; expected a mapping of {name} settings"
+            )
+        return cls(**d)
+
+
+IntAtLeast1 = Annotated[int, Field(ge=1), Allowed("an int ≥ 1")]
+NonNegative = Annotated[float, Field(ge=0), Allowed("a number ≥ 0")]
+Positive = Annotated[float, Field(gt=0), Allowed("a number > 0")]
 
 
 def allowed_text(model: type[BaseModel], key: str) -> str:

@@ -5,22 +5,18 @@ A bad value raises ValueError naming the key, the value and what is allowed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, ClassVar
 
 from pydantic import Field
 
-from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
-from rllib_asor.settings_model import Allowed, Settings
+from rllib_asor.settings_model import Allowed, BlockSettings, IntAtLeast1, NonNegative, Positive
 
 
-class BcoSettings(Settings):
+class BcoSettings(BlockSettings):
     """BCO's settings."""
 
-    model_config = {"frozen": True}
     block: ClassVar[str] = "bco"
     label: ClassVar[str] = "a BCO"
-    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
 
     demonstrations: Annotated[
         str | None, Allowed("a path: an .npz of state-only demonstrations or a dataset dir")
@@ -55,15 +51,3 @@ class BcoSettings(Settings):
     """Offline: episodes per dynamics of that evaluation."""
     seed: int = 0
     """Seed of the model's initial weights and its minibatches."""
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any] | BcoSettings | None) -> BcoSettings:
-        """Settings from a dict (the `bco:` block); unknown keys and bad values raise
-        ValueError."""
-        if d is None:
-            return cls()
-        if isinstance(d, BcoSettings):
-            return d
-        if not isinstance(d, Mapping):
-            raise ValueError(f"bco={d!r} is not allowed; expected a mapping of BCO settings")
-        return cls(**d)

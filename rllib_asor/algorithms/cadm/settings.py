@@ -8,13 +8,11 @@ naming the key, the value and what is allowed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, ClassVar
 
 from pydantic import Field
 
-from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
-from rllib_asor.settings_model import Allowed, Settings
+from rllib_asor.settings_model import Allowed, BlockSettings, IntAtLeast1, NonNegative, Positive
 
 Widths = Annotated[
     tuple[Annotated[int, Field(ge=1)], ...],
@@ -23,13 +21,11 @@ Widths = Annotated[
 ]
 
 
-class CadmSettings(Settings):
+class CadmSettings(BlockSettings):
     """CaDM's settings; each field names the authors' parameter."""
 
-    model_config = {"frozen": True}
     block: ClassVar[str] = "cadm"
     label: ClassVar[str] = "a CaDM"
-    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
 
     history_len: IntAtLeast1 = 10
     """Steps of (s_t, a_{t−1}) the context network reads (`history_length`)."""
@@ -47,14 +43,3 @@ class CadmSettings(Settings):
     """Factor on CaDM's loss (0: the context is not trained)."""
     target_entropy_ratio: NonNegative = 1.0
     """SAC's target entropy −ratio·|A| for `target_entropy="auto"` (SAC's own: 1)."""
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any] | CadmSettings | None) -> CadmSettings:
-        """Settings from a dict (the `cadm:` block); ValueError names a bad key or value."""
-        if d is None:
-            return cls()
-        if isinstance(d, CadmSettings):
-            return d
-        if not isinstance(d, Mapping):
-            raise ValueError(f"cadm={d!r} is not allowed; expected a mapping of CaDM settings")
-        return cls(**d)

@@ -7,18 +7,22 @@ with the default `kernel_type rbf_element_wise`).
 
 from __future__ import annotations
 
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, ClassVar
 
 from pydantic import Field, model_validator
 
 from rllib_asor.algorithms.escp.rmdm import KERNELS
-from rllib_asor.settings_model import Allowed, Settings, one_of
+from rllib_asor.settings_model import (
+    Allowed,
+    BlockSettings,
+    IntAtLeast1,
+    NonNegative,
+    Positive,
+    one_of,
+)
 
 IntAtLeast0 = Annotated[int, Field(ge=0), Allowed("an int ≥ 0")]
-IntAtLeast1 = Annotated[int, Field(ge=1), Allowed("an int ≥ 1")]
 TaskCount = Annotated[int, Field(ge=2), Allowed("an int ≥ 2")]
-NonNegative = Annotated[float, Field(ge=0), Allowed("a number ≥ 0")]
-Positive = Annotated[float, Field(gt=0), Allowed("a number > 0")]
 Share = Annotated[float, Field(ge=0, le=1), Allowed("a number ≥ 0 and ≤ 1")]
 Widths = Annotated[
     tuple[Annotated[int, Field(ge=1)], Annotated[int, Field(ge=1)]],
@@ -28,13 +32,11 @@ Widths = Annotated[
 Kernel = one_of(KERNELS)
 
 
-class EscpSettings(Settings):
+class EscpSettings(BlockSettings):
     """ESCP's settings; each field names ESCP's own parameter."""
 
-    model_config = {"frozen": True}
     block: ClassVar[str] = "escp"
     label: ClassVar[str] = "an ESCP"
-    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
 
     context_dim: IntAtLeast1 = 2
     """Size of z (`ep_dim`)."""
@@ -79,14 +81,3 @@ class EscpSettings(Settings):
                 f"({self.max_tasks})"
             )
         return self
-
-    @classmethod
-    def from_dict(cls, d: Any) -> EscpSettings:
-        """Settings from a dict (the `escp:` block); unknown keys raise ValueError."""
-        if d is None:
-            return cls()
-        if isinstance(d, EscpSettings):
-            return d
-        if not isinstance(d, dict):
-            raise ValueError(f"escp={d!r} is not allowed; expected a mapping of ESCP settings")
-        return cls(**d)

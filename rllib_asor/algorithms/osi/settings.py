@@ -8,22 +8,18 @@ what is allowed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, ClassVar
 
 from pydantic import Field
 
-from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
-from rllib_asor.settings_model import Allowed, Settings
+from rllib_asor.settings_model import Allowed, BlockSettings, IntAtLeast1, NonNegative, Positive
 
 
-class OsiSettings(Settings):
+class OsiSettings(BlockSettings):
     """OSI's settings; each field names the authors' parameter where there is one."""
 
-    model_config = {"frozen": True}
     block: ClassVar[str] = "osi"
     label: ClassVar[str] = "an OSI"
-    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
 
     history_len: IntAtLeast1 = 10
     """H, steps of (s_t, a_{t−1}) OSI reads (`OSI_hist`)."""
@@ -41,15 +37,3 @@ class OsiSettings(Settings):
     """Length of `info["dynamics_params"]`; None: read from the env when the config is built."""
     target_entropy_ratio: NonNegative = 1.0
     """SAC's target entropy −ratio·|A| for `target_entropy="auto"` (SAC's own: 1)."""
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any] | OsiSettings | None) -> OsiSettings:
-        """Settings from a dict (the `osi:` block); unknown keys and bad values raise
-        ValueError."""
-        if d is None:
-            return cls()
-        if isinstance(d, OsiSettings):
-            return d
-        if not isinstance(d, Mapping):
-            raise ValueError(f"osi={d!r} is not allowed; expected a mapping of OSI settings")
-        return cls(**d)

@@ -8,22 +8,18 @@ raises ValueError naming the key, the value and what is allowed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, ClassVar
 
 from pydantic import Field
 
-from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
-from rllib_asor.settings_model import Allowed, Settings
+from rllib_asor.settings_model import Allowed, BlockSettings, IntAtLeast1, NonNegative, Positive
 
 
-class SoilSettings(Settings):
+class SoilSettings(BlockSettings):
     """SOIL's settings."""
 
-    model_config = {"frozen": True}
     block: ClassVar[str] = "soil"
     label: ClassVar[str] = "a SOIL"
-    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
 
     demonstrations: Annotated[
         str | None, Allowed("a path: an .npz of state-only demonstrations or a dataset dir")
@@ -54,15 +50,3 @@ class SoilSettings(Settings):
     """Offline: episodes per dynamics of that evaluation."""
     seed: int = 0
     """Seed of the model's initial weights and the row sampling."""
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any] | SoilSettings | None) -> SoilSettings:
-        """Settings from a dict (the `soil:` block); unknown keys and bad values raise
-        ValueError."""
-        if d is None:
-            return cls()
-        if isinstance(d, SoilSettings):
-            return d
-        if not isinstance(d, Mapping):
-            raise ValueError(f"soil={d!r} is not allowed; expected a mapping of SOIL settings")
-        return cls(**d)
