@@ -121,6 +121,7 @@ def test_cli_train_address_joins_the_running_cluster(cluster, tmp_path):
     assert any(trial.glob("checkpoint_*/rllib_checkpoint.json"))
 
 
+@pytest.mark.slow  # SAC+ASOR on two DDP Learners (and their restore): test_many_learners.py
 def test_sac_asor_learners_on_two_nodes_keep_one_state(cluster):
     """Off-policy ASOR with one DDP Learner per worker node: it trains and both ranks hold the
     same discriminator, normalisers and λ (gloo across nodes)."""

@@ -231,6 +231,8 @@ def test_cql_asor_update_from_dataset_logs_asor_metrics_and_augments_rewards(dat
         algo.stop()
 
 
+@pytest.mark.slow  # ~50 s alone: Ray Data readers on two Learners; the same two-Learner
+# ASOR path (AsorBatchLearnerMixin) runs in test_maple_asor_on_two_learners_keeps_one_state
 def test_cql_asor_trains_on_two_learners_with_one_state(dataset, tmp_path):
     from tests.cluster.test_many_learners import _assert_same, _per_rank
 

@@ -101,6 +101,8 @@ def test_sac_asor_hopper_test_run_reports_asor_metrics(tmp_path, ray_session):
     assert json.loads((trial / "params.json").read_text())["asor"] == {"mode": "asor", "seed": 0}
 
 
+@pytest.mark.slow  # ~50 s of highway-env alone; the env: tests/envs/test_traffic.py, a PPO+ASOR
+# `--test` run: tests/cli/test_e2e.py
 def test_highway_ppo_asor_test_run_reports_asor_metrics(tmp_path, ray_session):
     # Fewer cars (2-6 instead of 5-20) keep highway-env's O(N²) step cheap; wiring unchanged.
     path = _patched(

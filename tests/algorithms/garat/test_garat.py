@@ -161,6 +161,8 @@ def test_garat_grounds_trains_in_the_grounded_source_and_evaluates_in_the_target
         started.stop()
 
 
+@pytest.mark.slow  # two Learner actors; GAIfO's discriminator on two Learners:
+# tests/algorithms/gaifo (test_two_learners_keep_one_discriminator), PPO+ASOR: tests/cluster
 def test_garat_with_asor_and_two_learners_trains(target_data):
     config = tiny_garat(target_data).learners(num_learners=2, num_cpus_per_learner=0.5)
     algo = rllib_asor.with_asor(config, seed=0).build_algo()
