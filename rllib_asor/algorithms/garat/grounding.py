@@ -1,21 +1,65 @@
 """GARAT's grounding step: the action transformer trained as GAIfO's policy on `GroundingEnv`.
 
-A local GAIfO run (PPO, no extra actors) whose discriminator reads the source-state part of the
-grounding MDP's observation (`state_dims`) and scores (s, s′) against the target's
-transitions; the GAIL reward −log(1 − D) is the transformer's only reward, as in the authors'
-`ATPEnv.step`. Returns the transformer (its module spec and weights) and the last statistics.
+A local GAIfO run (PPO, no extra actors) whose discriminator scores the grounding MDP's
+transitions against the target's: (s, s′), the source-state part of its observation
+(`state_dims`), or with `disc_input: s_a_*` (s, a, s′) / (s, a, s′ − s), a the behaviour
+action in the observation (s, a), the target rows' a = π₀(s) (`with_behaviour_actions`, as the
+authors' target data carry π₀'s actions). The GAIL reward −log(1 − D) is the transformer's
+only reward, as in the authors' `ATPEnv.step`. Returns the transformer (its module spec and
+weights) and the last statistics.
 """
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-from rllib_asor.algorithms.garat.envs import GroundingEnv, SavedTransformer, make_source
+from rllib_asor.algorithms.common.demonstrations import (
+    Demonstrations,
+    load_demonstrations,
+    save_demonstrations,
+)
+from rllib_asor.algorithms.garat.envs import (
+    GroundingEnv,
+    SavedTransformer,
+    behaviour_policy,
+    make_source,
+)
 from rllib_asor.algorithms.garat.settings import GaratSettings
+
+GAIFO_INPUT = {"s_next": "s_next", "s_a_next": "obs_next", "s_a_delta": "obs_delta"}
+"""`GaratSettings.disc_input` -> `GaifoSettings.disc_input` on the grounding MDP."""
+
+
+def check_disc_input(settings: GaratSettings, behaviour: object) -> None:
+    """ValueError when `disc_input` needs the behaviour policy's actions and there is none."""
+    if settings.disc_input != "s_next" and behaviour is None:
+        raise ValueError(
+            f"garat.disc_input={settings.disc_input!r} needs garat.behaviour_policy (the target "
+            "rows' action a = π₀(s)); allowed: s_next with random behaviour actions, or "
+            "s_a_next | s_a_delta with a behaviour policy"
+        )
+
+
+def with_behaviour_actions(
+    demos: Demonstrations, policy: Callable[[np.ndarray], np.ndarray], space: gym.spaces.Box
+) -> Demonstrations:
+    """`demos` with observations (s, a): a = clip(policy(s)) to `space` (as `GroundingEnv`
+    plays it), for s_t and s_{t+1}."""
+
+    def add(obs: np.ndarray) -> np.ndarray:
+        acts = [np.clip(policy(o), space.low, space.high).reshape(-1) for o in obs]
+        return np.concatenate([obs.reshape(len(obs), -1), np.asarray(acts)], axis=1)
+
+    return Demonstrations.of(
+        add(demos.obs), add(demos.next_obs), demos.episode_ids, demos.terminateds
+    )
 
 
 def ground(
@@ -29,14 +73,34 @@ def ground(
     `demonstrations` (`behaviour`: the behaviour policy's checkpoint or a function obs -> action,
     None: random actions);
     returns (the transformer, statistics of the last iteration)."""
-    from rllib_asor.algorithms.gaifo.config import GaifoConfig
-
     s = settings
+    check_disc_input(s, behaviour)
     source = make_source({"env": env, "env_config": env_config})
     try:
         state_dims = int(np.prod(source.observation_space.shape))
+        obs_space, act_space = source.observation_space, source.action_space
     finally:
         source.close()
+    with tempfile.TemporaryDirectory(prefix="garat-") as tmp:
+        if s.disc_input != "s_next":
+            policy = behaviour if callable(behaviour) else behaviour_policy(str(behaviour))
+            demos = load_demonstrations(demonstrations, obs_space)
+            demonstrations = str(Path(tmp) / "target-with-actions.npz")
+            save_demonstrations(demonstrations, with_behaviour_actions(demos, policy, act_space))
+        return _ground(env, env_config, s, demonstrations, behaviour, state_dims)
+
+
+def _ground(
+    env: str,
+    env_config: dict[str, Any] | None,
+    s: GaratSettings,
+    demonstrations: str,
+    behaviour: str | Callable[[np.ndarray], np.ndarray] | None,
+    state_dims: int,
+) -> tuple[SavedTransformer, dict[str, float]]:
+    """The GAIfO run of `ground` on target rows at `demonstrations`."""
+    from rllib_asor.algorithms.gaifo.config import GaifoConfig
+
     batch = s.grounding_batch_size
     config = (
         GaifoConfig()
@@ -65,6 +129,7 @@ def ground(
         .gaifo(
             demonstrations=demonstrations,
             state_dims=state_dims,
+            disc_input=GAIFO_INPUT[s.disc_input],
             disc_hiddens=s.disc_hiddens,
             disc_lr=s.disc_lr,
             disc_steps=s.disc_steps,
