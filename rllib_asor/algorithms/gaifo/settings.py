@@ -57,6 +57,10 @@ class GaifoSettings(Settings):
     (s, s′); `obs_next` (o, s′), the whole observation then s′ (GARAT's (s, a, s′) on its
     grounding MDP, whose observation is (s, a)); `obs_delta` (o, s′ − s). With `obs_*` the
     demonstrations carry the whole observation."""
+    disc_on_batch: bool = True
+    """Train D on each training batch's policy rows (`disc_steps` steps, after their rewards are
+    written); false: D is trained only from outside (`GaifoTrainer.update`; GARAT's
+    `disc_data: deterministic`)."""
     seed: int = 0
     """Seed of the expert-row sampling."""
 

@@ -28,6 +28,7 @@ from rllib_asor.algorithms.common.demonstrations import (
 from rllib_asor.algorithms.garat.envs import (
     GroundingEnv,
     SavedTransformer,
+    Transformer,
     behaviour_policy,
     make_source,
 )
@@ -102,18 +103,16 @@ def _ground(
     from rllib_asor.algorithms.gaifo.config import GaifoConfig
 
     batch = s.grounding_batch_size
+    grounding_config = {
+        "env": env,
+        "env_config": dict(env_config or {}),
+        "action_tf_ratio": s.action_tf_ratio,
+        "seed": s.seed,
+        "behaviour": behaviour,
+    }
     config = (
         GaifoConfig()
-        .environment(
-            GroundingEnv,
-            env_config={
-                "env": env,
-                "env_config": dict(env_config or {}),
-                "action_tf_ratio": s.action_tf_ratio,
-                "seed": s.seed,
-                "behaviour": behaviour,
-            },
-        )
+        .environment(GroundingEnv, env_config=grounding_config)
         .env_runners(num_env_runners=0, num_envs_per_env_runner=1)
         .environment(normalize_actions=False, clip_actions=True)
         .learners(num_learners=0)
@@ -130,6 +129,7 @@ def _ground(
             demonstrations=demonstrations,
             state_dims=state_dims,
             disc_input=GAIFO_INPUT[s.disc_input],
+            disc_on_batch=s.disc_data == "rollouts",
             disc_hiddens=s.disc_hiddens,
             disc_lr=s.disc_lr,
             disc_steps=s.disc_steps,
@@ -140,24 +140,71 @@ def _ground(
         .reporting(metrics_num_episodes_for_smoothing=5)
     )
     algo = config.build_algo()
+    grounding = GroundingEnv(grounding_config) if s.disc_data == "deterministic" else None
     try:
         stats: dict[str, float] = {}
-        for _ in range(s.grounding_iterations):
+        for i in range(s.grounding_iterations):
+            if grounding is not None:
+                obs, nxt = deterministic_rows(grounding, saved_transformer(algo), batch, s.seed, i)
+                stats = train_discriminator(algo, obs, nxt)
             result = algo.train()
-            stats = {
-                f"grounding_{k}": float(v)
-                for k, v in (result.get("learners", {}).get("gaifo") or {}).items()
-            }
-        module = algo.get_module()
-        saved = SavedTransformer(
-            RLModuleSpec(
-                module_class=type(module),
-                observation_space=module.observation_space,
-                action_space=module.action_space,
-                model_config=module.model_config,
-            ),
-            module.get_state(inference_only=False),
-        )
+            if grounding is None:
+                stats = {
+                    f"grounding_{k}": float(v)
+                    for k, v in (result.get("learners", {}).get("gaifo") or {}).items()
+                }
+        saved = saved_transformer(algo)
     finally:
         algo.stop()
+        if grounding is not None:
+            grounding.close()
     return saved, stats
+
+
+def saved_transformer(algo: Any) -> SavedTransformer:
+    """The transformer as it is now: its RLModule spec and weights."""
+    module = algo.get_module()
+    return SavedTransformer(
+        RLModuleSpec(
+            module_class=type(module),
+            observation_space=module.observation_space,
+            action_space=module.action_space,
+            model_config=module.model_config,
+        ),
+        module.get_state(inference_only=False),
+    )
+
+
+def deterministic_rows(
+    env: GroundingEnv, saved: SavedTransformer, n: int, seed: int = 0, round_: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """`n` transitions (o, o′) of the grounding MDP `env` with the transformer's deterministic Δ
+    (episodes reset with seeds from `seed`, `round_` and the episode count)."""
+    transformer = Transformer(saved)
+    k = int(np.prod(env.source.observation_space.shape))
+    obs_rows, next_rows, episode = [], [], 0
+    o, _ = env.reset(seed=seed + 100_000 * (round_ + 1))
+    while len(obs_rows) < n:
+        o2, _, terminated, truncated, _ = env.step(transformer.delta(o[:k], o[k:]))
+        obs_rows.append(o)
+        next_rows.append(o2)
+        o = o2
+        if terminated or truncated:
+            episode += 1
+            o, _ = env.reset(seed=seed + 100_000 * (round_ + 1) + episode)
+    return np.asarray(obs_rows, np.float32), np.asarray(next_rows, np.float32)
+
+
+def train_discriminator(algo: Any, obs: np.ndarray, next_obs: np.ndarray) -> dict[str, float]:
+    """`disc_steps` steps of the Learner's discriminator on the grounded rows (o, o′) against
+    the target's; its statistics as `grounding_*`."""
+
+    def update(learner: Any) -> dict[str, float]:
+        import torch
+
+        trainer = learner.gaifo
+        o = torch.as_tensor(obs, device=trainer.device)
+        o2 = torch.as_tensor(next_obs, device=trainer.device)
+        return {f"grounding_{k}": float(v) for k, v in trainer.update(trainer.features(o, o2)).items()}
+
+    return [r.get() for r in algo.learner_group.foreach_learner(update)][0]

@@ -72,6 +72,11 @@ class GaratSettings(Settings):
     the change of the state, which a small dynamics change moves by a larger share of its
     spread. `s_a_*` need `behaviour_policy` (the target rows' a is π₀(s)). Inputs are
     normalised by the target rows' mean and std."""
+    disc_data: one_of(("rollouts", "deterministic")) = "rollouts"
+    """The grounded rows D trains on: `rollouts`, the transformer's PPO batch (Δ sampled);
+    `deterministic`, before each grounding iteration `grounding_batch_size` fresh steps of the
+    grounding MDP with the transformer's deterministic Δ, D fixed during the PPO update (the
+    authors' `train_discriminator`: `GroundedEnv(use_deterministic=True)`)."""
     grad_penalty: NonNegative = 1.0
     """Gradient penalty on target inputs (`--compute_grad_penalty`)."""
     seed: int = 0
