@@ -5,8 +5,10 @@ transitions against the target's: (s, s′), the source-state part of its observ
 (`state_dims`), or with `disc_input: s_a_*` (s, a, s′) / (s, a, s′ − s), a the behaviour
 action in the observation (s, a), the target rows' a = π₀(s) (`with_behaviour_actions`, as the
 authors' target data carry π₀'s actions). The GAIL reward −log(1 − D) is the transformer's
-only reward, as in the authors' `ATPEnv.step`. Returns the transformer (its module spec and
-weights) and the last statistics.
+only reward, as in the authors' `ATPEnv.step`. D trains on the transformer's PPO batch, or with
+`disc_data: deterministic` (the authors' `train_discriminator`) on fresh steps with its
+deterministic Δ before each iteration (`deterministic_rows`, `train_discriminator`). Returns
+the transformer (its module spec and weights) and the last statistics.
 """
 
 from __future__ import annotations

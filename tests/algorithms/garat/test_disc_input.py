@@ -82,3 +82,42 @@ def test_disc_input_is_validated_naming_the_allowed_values(tmp_path):
     save_demonstrations(path, Demonstrations.of(obs, obs, [0, 0], [False, False]))
     with pytest.raises(ValueError, match=needs):
         config.garat(demonstrations=str(path), disc_input="s_a_next").validate()
+
+
+def test_deterministic_rows_step_the_grounding_mdp_with_the_transformers_mean_delta():
+    from ray.rllib.algorithms.ppo.torch.default_ppo_torch_rl_module import (
+        DefaultPPOTorchRLModule,
+    )
+    from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+
+    from rllib_asor.algorithms.garat.envs import GroundingEnv, SavedTransformer
+    from rllib_asor.algorithms.garat.grounding import deterministic_rows
+
+    spec = RLModuleSpec(
+        module_class=DefaultPPOTorchRLModule,
+        observation_space=gym.spaces.Box(-10, 10, (4,), np.float32),
+        action_space=gym.spaces.Box(-4, 4, (1,), np.float32),
+        model_config={"fcnet_hiddens": [4]},
+    )
+    module = spec.build()
+    with torch.no_grad():  # Δ = 1 everywhere (its mean); its log-std 0 would sample ±1 more
+        for name, p in module.named_parameters():
+            p.zero_()
+            if name.startswith("pi.") and name.endswith("bias"):
+                p[0] = 1.0
+    env = GroundingEnv({"env": "Pendulum-v1", "env_config": {"g": 10.0},
+                        "behaviour": lambda s: np.array([0.5], np.float32)})  # fmt: skip
+    obs, nxt = deterministic_rows(env, SavedTransformer(spec, module.get_state()), 3, seed=7)
+    ref = gym.make("Pendulum-v1", g=10.0)
+    s, _ = ref.reset(seed=7 + 100_000)  # round 0's first episode
+    for t in range(3):  # a = 0.5 from π₀, played 0.5 + 1 = 1.5
+        assert np.allclose(obs[t], [*s, 0.5])
+        s = ref.step(np.array([1.5], np.float32))[0]
+        assert np.allclose(nxt[t], [*s, 0.5])
+
+
+def test_disc_data_is_validated_naming_the_allowed_values():
+    with pytest.raises(ValueError, match="garat.disc_data='x' is not allowed; expected rollouts "
+                       r"\| deterministic"):  # fmt: skip
+        GaratSettings(disc_data="x")
+    assert GaratSettings().disc_data == "rollouts"
