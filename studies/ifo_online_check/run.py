@@ -239,8 +239,13 @@ def _returns(env, act, episodes: int = 20) -> float:
     return float(np.mean(rets))
 
 
-def garat_pi0(disc_steps: str = "5") -> None:
-    """Run 2 (run 3: `disc_steps` 50): the grounding under a deterministic π₀ (README.md)."""
+def garat_pi0(
+    disc_steps: str = "5", disc_input: str = "s_next", grad_penalty: str = "1",
+    disc_data: str = "rollouts",
+) -> None:
+    """Run 2 (run 3: `disc_steps` 50; run 4: 50, `disc_input` s_a_delta, `grad_penalty` 0;
+    run 5: run 4 with `disc_data` deterministic): the grounding under a deterministic π₀
+    (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
@@ -261,7 +266,8 @@ def garat_pi0(disc_steps: str = "5") -> None:
         t0 = time.time()
         settings = GaratSettings(
             grounding_iterations=30, grounding_batch_size=2000, seed=seed,
-            disc_steps=int(disc_steps),
+            disc_steps=int(disc_steps), disc_input=disc_input, grad_penalty=float(grad_penalty),
+            disc_data=disc_data,
         )
         transformer, stats = ground("Pendulum-v1", SOURCE, settings, str(path), pendulum_pi0)
         target = gym.make("Pendulum-v1", **TARGET).unwrapped
@@ -291,7 +297,11 @@ def garat_pi0(disc_steps: str = "5") -> None:
             "wall_s": round(time.time() - t0, 1),
         }
         tag = "garat_pi0" if disc_steps == "5" else f"garat_pi0_disc{disc_steps}"
-        print(f"GARAT pi0 ({disc_steps} D steps) seed {seed}: {row}")
+        if (disc_input, grad_penalty) != ("s_next", "1"):
+            tag += f"_{disc_input}_gp{grad_penalty}"
+        if disc_data != "rollouts":
+            tag += f"_{disc_data}"
+        print(f"GARAT pi0 ({disc_steps} D steps, {disc_input}, gp {grad_penalty}) seed {seed}: {row}")
         _save(f"{tag}/seed{seed}", row)
 
 

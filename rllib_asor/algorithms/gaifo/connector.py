@@ -23,7 +23,8 @@ METRICS_KEY = "gaifo"
 
 
 class GaifoRewardPiece(ConnectorV2):
-    """rewards ← D's reward (+ weighted env reward) of each valid row; then D's update."""
+    """rewards ← D's reward (+ weighted env reward) of each valid row; then D's update (unless
+    `disc_on_batch` is off)."""
 
     def __init__(
         self,
@@ -40,6 +41,8 @@ class GaifoRewardPiece(ConnectorV2):
 
     def __call__(self, *, rl_module: Any, batch: dict, metrics: Any = None, **kwargs: Any) -> Any:
         rows = [self._relabel(batch[mid]) for mid in self.module_ids if mid in batch]
+        if not self.trainer.settings.disc_on_batch:
+            return batch
         feats = torch.cat(rows) if rows else torch.zeros(0, self.trainer.expert.shape[1], device=self.trainer.device)
         stats = self.trainer.update(feats.to(self.trainer.device))
         if metrics is not None and stats:

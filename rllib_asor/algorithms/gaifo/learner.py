@@ -39,8 +39,8 @@ def resolve_path(path: str) -> str:
 
 def demonstration_space(space: gym.Space, settings: GaifoSettings) -> gym.Space:
     """The space the demonstrations' observations must have: the env's, or its first
-    `state_dims` features."""
-    if settings.state_dims is None:
+    `state_dims` features (`disc_input: s_next`; the `obs_*` inputs read the whole one)."""
+    if settings.state_dims is None or settings.disc_input != "s_next":
         return space
     return gym.spaces.Box(-float("inf"), float("inf"), (settings.state_dims,))
 

@@ -14,20 +14,37 @@ import torch.nn.functional as F
 
 from rllib_asor.algorithms.gaifo.discriminator import discriminator_loss
 
+FEATURES = ("s_next", "obs_next", "obs_delta")
+"""The discriminator's inputs (`GaifoSettings.disc_input`)."""
+
 
 def transition_features(
-    obs: torch.Tensor, next_obs: torch.Tensor, state_dims: int | None = None
+    obs: torch.Tensor,
+    next_obs: torch.Tensor,
+    state_dims: int | None = None,
+    form: str = "s_next",
 ) -> torch.Tensor:
-    """[N, 2·k] rows (s, s′): the first `state_dims` (None: all) flattened features of each."""
-    s, s2 = obs.reshape(obs.shape[0], -1), next_obs.reshape(next_obs.shape[0], -1)
-    if state_dims is not None:
-        if state_dims > s.shape[1]:
-            raise ValueError(
-                f"gaifo.state_dims={state_dims} exceeds the observation's {s.shape[1]} features; "
-                "allowed: at most that many"
-            )
-        s, s2 = s[:, :state_dims], s2[:, :state_dims]
-    return torch.cat([s, s2], dim=-1).float()
+    """D's rows of transitions (o, o′), s the first `state_dims` (None: all) flattened features
+    of o: `s_next` (s, s′), `obs_next` (o, s′), `obs_delta` (o, s′ − s)."""
+    o, o2 = obs.reshape(obs.shape[0], -1), next_obs.reshape(next_obs.shape[0], -1)
+    k = o.shape[1] if state_dims is None else state_dims
+    if k > o.shape[1]:
+        raise ValueError(
+            f"gaifo.state_dims={state_dims} exceeds the observation's {o.shape[1]} features; "
+            "allowed: at most that many"
+        )
+    s, s2 = o[:, :k], o2[:, :k]
+    if form == "s_next":
+        rows = [s, s2]
+    elif form == "obs_next":
+        rows = [o, s2]
+    elif form == "obs_delta":
+        rows = [o, s2 - s]
+    else:
+        raise ValueError(
+            f"gaifo.disc_input={form!r} is not allowed; expected {' | '.join(FEATURES)}"
+        )
+    return torch.cat(rows, dim=-1).float()
 
 
 def imitation_reward(logits: torch.Tensor, form: str = "gail") -> torch.Tensor:

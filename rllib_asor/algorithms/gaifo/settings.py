@@ -52,6 +52,15 @@ class GaifoSettings(Settings):
         Annotated[int, Field(ge=1)] | None, Allowed("null or an int ≥ 1")
     ] = None
     """The discriminator reads the first `state_dims` observation features (None: all)."""
+    disc_input: one_of(("s_next", "obs_next", "obs_delta")) = "s_next"
+    """What D reads of a transition (o, o′), s the first `state_dims` features of o: `s_next`
+    (s, s′); `obs_next` (o, s′), the whole observation then s′ (GARAT's (s, a, s′) on its
+    grounding MDP, whose observation is (s, a)); `obs_delta` (o, s′ − s). With `obs_*` the
+    demonstrations carry the whole observation."""
+    disc_on_batch: bool = True
+    """Train D on each training batch's policy rows (`disc_steps` steps, after their rewards are
+    written); false: D is trained only from outside (`GaifoTrainer.update`; GARAT's
+    `disc_data: deterministic`)."""
     seed: int = 0
     """Seed of the expert-row sampling."""
 

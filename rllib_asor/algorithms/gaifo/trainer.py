@@ -20,8 +20,9 @@ from rllib_asor.algorithms.gaifo.settings import GaifoSettings
 
 
 class GaifoTrainer:
-    """D(s, s′) with its optimizer and the expert transitions (module docstring); with
-    `input_norm` the inputs are normalised by the expert rows' mean and std."""
+    """D(s, s′) (or what `disc_input` names) with its optimizer and the expert transitions
+    (module docstring); with `input_norm` the inputs are normalised by the expert rows' mean
+    and std."""
 
     def __init__(
         self, settings: GaifoSettings, demos: Demonstrations, device: Any = "cpu", rank: int = 0
@@ -32,6 +33,7 @@ class GaifoTrainer:
             torch.as_tensor(demos.obs, device=self.device),
             torch.as_tensor(demos.next_obs, device=self.device),
             settings.state_dims,
+            settings.disc_input,
         ).to(self.device)
         self.disc = TransitionDiscriminator(self.expert.shape[1], settings.disc_hiddens).to(
             self.device
@@ -42,7 +44,8 @@ class GaifoTrainer:
         self._rng = np.random.default_rng(settings.seed + 1000 * rank)
 
     def features(self, obs: torch.Tensor, next_obs: torch.Tensor) -> torch.Tensor:
-        return transition_features(obs, next_obs, self.settings.state_dims).to(self.device)
+        s = self.settings
+        return transition_features(obs, next_obs, s.state_dims, s.disc_input).to(self.device)
 
     @torch.no_grad()
     def reward(self, features: torch.Tensor) -> torch.Tensor:

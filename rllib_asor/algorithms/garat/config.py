@@ -24,6 +24,7 @@ from ray.rllib.algorithms.ppo import PPO, PPOConfig
 from rllib_asor.algorithms.common.demonstrations import load_demonstrations
 from rllib_asor.algorithms.gaifo.learner import resolve_path
 from rllib_asor.algorithms.garat.envs import GroundedEnv, make_source
+from rllib_asor.algorithms.garat.grounding import check_disc_input
 from rllib_asor.algorithms.garat.settings import GaratSettings
 
 NO_DEMOS = (
@@ -73,6 +74,7 @@ class GaratConfig(PPOConfig):
             source.close()
         load_demonstrations(resolve_path(settings.demonstrations), space)
         policy = settings.behaviour_policy
+        check_disc_input(settings, policy or None)
         if policy and not os.path.exists(resolve_path(policy)):
             raise ValueError(
                 f"garat.behaviour_policy {policy} does not exist; allowed: an Algorithm's or an "

@@ -14,7 +14,7 @@ from typing import Annotated, Any, ClassVar
 from pydantic import Field
 
 from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
-from rllib_asor.settings_model import Allowed, Settings
+from rllib_asor.settings_model import Allowed, Settings, one_of
 
 
 class GaratSettings(Settings):
@@ -65,6 +65,18 @@ class GaratSettings(Settings):
     """Adam lr of the discriminator (`--disc_lr`)."""
     disc_steps: IntAtLeast1 = 5
     """Discriminator gradient steps per grounding iteration."""
+    disc_input: one_of(("s_next", "s_a_next", "s_a_delta")) = "s_next"
+    """What the discriminator reads of a transition: `s_next` (s, s′); `s_a_next` (s, a, s′),
+    a the behaviour policy's action (before the transformer), the authors' input
+    (`reinforcedgat.py`: `concat_sas`); `s_a_delta` (s, a, s′ − s), the same information with
+    the change of the state, which a small dynamics change moves by a larger share of its
+    spread. `s_a_*` need `behaviour_policy` (the target rows' a is π₀(s)). Inputs are
+    normalised by the target rows' mean and std."""
+    disc_data: one_of(("rollouts", "deterministic")) = "rollouts"
+    """The grounded rows D trains on: `rollouts`, the transformer's PPO batch (Δ sampled);
+    `deterministic`, before each grounding iteration `grounding_batch_size` fresh steps of the
+    grounding MDP with the transformer's deterministic Δ, D fixed during the PPO update (the
+    authors' `train_discriminator`: `GroundedEnv(use_deterministic=True)`)."""
     grad_penalty: NonNegative = 1.0
     """Gradient penalty on target inputs (`--compute_grad_penalty`)."""
     seed: int = 0

@@ -91,6 +91,33 @@ def test_features_are_s_and_s_next_optionally_their_first_state_dims():
         transition_features(obs, nxt, state_dims=4)
 
 
+def test_features_obs_next_and_obs_delta_read_the_whole_observation_then_s_next_or_its_change():
+    obs, nxt = torch.tensor([[1.0, 2.0, 9.0]]), torch.tensor([[3.0, 7.0, 5.0]])
+    assert transition_features(obs, nxt, 2, "obs_next").tolist() == [[1, 2, 9, 3, 7]]
+    assert transition_features(obs, nxt, 2, "obs_delta").tolist() == [[1, 2, 9, 2, 5]]
+    assert transition_features(obs, nxt, None, "obs_delta").tolist() == [[1, 2, 9, 2, 5, -4]]
+    with pytest.raises(ValueError, match="gaifo.disc_input='sas' is not allowed; expected"):
+        transition_features(obs, nxt, 2, "sas")
+    assert GaifoSettings().disc_input == "s_next"  # GAIfO's default: (s, s′), as before
+
+
+def test_piece_without_disc_on_batch_writes_rewards_and_leaves_d_as_it_was():
+    settings = GaifoSettings(disc_on_batch=False, disc_lr=1e-1, input_norm=False)
+    trainer = GaifoTrainer(settings, _demos())
+    before = [p.detach().clone() for p in trainer.disc.parameters()]
+    batch = {"default_policy": {
+        Columns.OBS: torch.tensor([[0.0, 0], [1, 1], [2, 2]]),
+        Columns.REWARDS: torch.tensor([1.0, 2.0, 0.0]),
+        Columns.LOSS_MASK: torch.tensor([True, True, False]),
+    }}  # fmt: skip
+    GaifoRewardPiece(trainer=trainer, module_ids=("default_policy",))(rl_module=None, batch=batch)
+    feats = trainer.features(torch.tensor([[0.0, 0], [1, 1]]), torch.tensor([[1.0, 1], [2, 2]]))
+    expected = trainer.reward(feats).tolist() + [0.0]
+    assert batch["default_policy"][Columns.REWARDS].tolist() == pytest.approx(expected)
+    assert all(torch.equal(a, b) for a, b in zip(before, trainer.disc.parameters(), strict=True))
+    assert GaifoSettings().disc_on_batch  # GAIfO's default: D trains on every batch
+
+
 def test_trainer_learns_to_tell_expert_transitions_from_others():
     settings = GaifoSettings(disc_steps=200, disc_lr=1e-2, disc_hiddens=(16,), input_norm=False)
     trainer = GaifoTrainer(settings, _demos())
