@@ -5,22 +5,25 @@ A bad value raises ValueError naming the key, the value and what is allowed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Annotated, Any, ClassVar
+from typing import Annotated, ClassVar
 
 from pydantic import Field
 
-from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
-from rllib_asor.settings_model import Allowed, Settings, one_of
+from rllib_asor.settings_model import (
+    Allowed,
+    BlockSettings,
+    IntAtLeast1,
+    NonNegative,
+    Positive,
+    one_of,
+)
 
 
-class GaifoSettings(Settings):
+class GaifoSettings(BlockSettings):
     """GAIfO's settings."""
 
-    model_config = {"frozen": True}
     block: ClassVar[str] = "gaifo"
     label: ClassVar[str] = "a GAIfO"
-    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
 
     demonstrations: Annotated[
         str | None, Allowed("a path: an .npz of state-only demonstrations or a dataset dir")
@@ -63,15 +66,3 @@ class GaifoSettings(Settings):
     `disc_data: deterministic`)."""
     seed: int = 0
     """Seed of the expert-row sampling."""
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any] | GaifoSettings | None) -> GaifoSettings:
-        """Settings from a dict (the `gaifo:` block); unknown keys and bad values raise
-        ValueError."""
-        if d is None:
-            return cls()
-        if isinstance(d, GaifoSettings):
-            return d
-        if not isinstance(d, Mapping):
-            raise ValueError(f"gaifo={d!r} is not allowed; expected a mapping of GAIfO settings")
-        return cls(**d)

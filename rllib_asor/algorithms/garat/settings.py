@@ -8,22 +8,25 @@ what is allowed.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Annotated, Any, ClassVar
 
 from pydantic import Field
 
-from rllib_asor.algorithms.escp.settings import IntAtLeast1, NonNegative, Positive
-from rllib_asor.settings_model import Allowed, Settings, one_of
+from rllib_asor.settings_model import (
+    Allowed,
+    BlockSettings,
+    IntAtLeast1,
+    NonNegative,
+    Positive,
+    one_of,
+)
 
 
-class GaratSettings(Settings):
+class GaratSettings(BlockSettings):
     """GARAT's settings."""
 
-    model_config = {"frozen": True}
     block: ClassVar[str] = "garat"
     label: ClassVar[str] = "a GARAT"
-    bad_value: ClassVar[str] = "{block}.{key}={value!r} is not allowed; expected {allowed}"
 
     demonstrations: Annotated[
         str | None, Allowed("a path: an .npz of state-only target transitions or a dataset dir")
@@ -81,15 +84,3 @@ class GaratSettings(Settings):
     """Gradient penalty on target inputs (`--compute_grad_penalty`)."""
     seed: int = 0
     """Seed of the grounding run (its env, behaviour actions and networks)."""
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any] | GaratSettings | None) -> GaratSettings:
-        """Settings from a dict (the `garat:` block); unknown keys and bad values raise
-        ValueError."""
-        if d is None:
-            return cls()
-        if isinstance(d, GaratSettings):
-            return d
-        if not isinstance(d, Mapping):
-            raise ValueError(f"garat={d!r} is not allowed; expected a mapping of GARAT settings")
-        return cls(**d)
