@@ -14,7 +14,7 @@ export MUJOCO_GL ?= egl
 comma := ,
 PIP_FILTER := 2>&1 | { grep -v "^WARNING: Location '.*' is ignored" || true; }
 
-.PHONY: install train smoke test lint bench clean docs compat
+.PHONY: install train smoke test test-slow lint bench clean docs compat
 
 # $(call venv_install,VENV,EXTRAS,MORE): VENV (created if missing) gets pip, torch and this tree
 # installed editable with EXTRAS, plus the requirements MORE (in the same resolve).
@@ -50,6 +50,11 @@ smoke: $(STAMP)
 TEST_WORKERS ?= 2
 test: $(STAMP)
 	$(PY) -m pytest -q --timeout=900 --durations=30 -n $(TEST_WORKERS)
+
+# The `slow` tests: long end-to-end runs, and runs whose behaviour a faster test in `make test`
+# covers (each names it). About half an hour on 2 cores.
+test-slow: $(STAMP)
+	$(PY) -m pytest -q -m slow --timeout=1800 --durations=20 -n $(TEST_WORKERS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks studies mkdocs_hooks.py
