@@ -240,6 +240,13 @@ def test_concat_batches_of_three_shifts_each_by_all_rows_before_it():
     assert whole.timestep == 0.5
 
 
+def test_concat_batches_shifts_the_ranked_rows_and_ranks_all_rows_of_a_batch_without_them():
+    first, last = _batch(3, 0, ranked=torch.tensor([2, 0])), _batch(4, 20, ranked=torch.tensor([1]))
+    whole = concat_batches([first, _batch(2, 10), last])
+    assert whole.ranked.tolist() == [2, 0, 3, 4, 6]
+    assert concat_batches([_batch(2, 0), _batch(1, 5)]).ranked is None
+
+
 def test_concat_batches_drops_an_optional_tensor_one_batch_lacks():
     whole = concat_batches([_batch(2, 0), _batch(1, 5, next_features=None, next_values=None)])
     assert whole.next_features is None and whole.next_values is None
