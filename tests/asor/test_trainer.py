@@ -166,3 +166,36 @@ def test_the_one_pass_training_loss_is_the_gan_loss_plus_the_regulariser_and_its
         torch.testing.assert_close(a, b)
     if penalty:
         assert stats["disc_grad_penalty"] > 0
+
+
+def _adam_steps(optimizer: torch.optim.Optimizer) -> set[int]:
+    return {int(s["step"]) for s in optimizer.state.values()}
+
+
+@pytest.mark.parametrize(("minibatch", "rows"), [(16, None), (8, 16.0), (None, None)])
+def test_both_networks_take_the_steps_asked_of_them(minibatch, rows):
+    t = trainer()
+    batch = episodes(1)
+    result = t.step(batch, minibatch_size=minibatch, rows=rows)
+
+    def steps(n: int) -> int:
+        budget = n if rows is None else rows
+        return 1 if minibatch is None else math.ceil(budget / min(minibatch, n))
+
+    assert _adam_steps(t.disc_optimizer) == {steps(result.disc_features.shape[0])}
+    assert _adam_steps(t.proxy_optimizer) == {steps(batch.features.shape[0])}
+
+
+def test_the_learning_rates_reach_the_networks():
+    slow, default = trainer(disc_lr=1e-9, rnd_lr=1e-9), trainer()
+    before = params(slow.state.disc), params(slow.proxy)
+    batch = episodes(1)
+    for t in (slow, default):
+        t.step(batch, minibatch_size=16)
+    for net, start, moved in ((slow.state.disc, before[0], default.state.disc),
+                              (slow.proxy, before[1], default.proxy)):  # fmt: skip
+        change = max((a - b).abs().max().item() for a, b in zip(params(net), start, strict=True))
+        default_change = max(
+            (a - b).abs().max().item() for a, b in zip(params(moved), start, strict=True)
+        )
+        assert change < 1e-6 < default_change
