@@ -245,7 +245,8 @@ def garat_pi0(
 ) -> None:
     """Run 2 (run 3: `disc_steps` 50; run 4: 50, `disc_input` s_a_delta, `grad_penalty` 0;
     run 5: run 4 with `disc_data` deterministic; run 6: run 5 with `grad_penalty` 10 of form
-    one_centred_mix and 60 iterations): the grounding under a deterministic π₀ (README.md)."""
+    one_centred_mix and 80 iterations; run 7: run 5 with 80 iterations): the grounding under a
+    deterministic π₀ (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
