@@ -241,11 +241,12 @@ def _returns(env, act, episodes: int = 20) -> float:
 
 def garat_pi0(
     disc_steps: str = "5", disc_input: str = "s_next", grad_penalty: str = "1",
-    disc_data: str = "rollouts",
+    disc_data: str = "rollouts", grad_penalty_form: str = "zero_centred", iterations: str = "30",
 ) -> None:
     """Run 2 (run 3: `disc_steps` 50; run 4: 50, `disc_input` s_a_delta, `grad_penalty` 0;
-    run 5: run 4 with `disc_data` deterministic): the grounding under a deterministic π₀
-    (README.md)."""
+    run 5: run 4 with `disc_data` deterministic; run 6: run 5 with `grad_penalty` 10 of form
+    one_centred_mix and 80 iterations; run 7: run 5 with 80 iterations): the grounding under a
+    deterministic π₀ (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
@@ -265,9 +266,9 @@ def garat_pi0(
     for seed in SEEDS:
         t0 = time.time()
         settings = GaratSettings(
-            grounding_iterations=30, grounding_batch_size=2000, seed=seed,
+            grounding_iterations=int(iterations), grounding_batch_size=2000, seed=seed,
             disc_steps=int(disc_steps), disc_input=disc_input, grad_penalty=float(grad_penalty),
-            disc_data=disc_data,
+            disc_data=disc_data, grad_penalty_form=grad_penalty_form,
         )
         transformer, stats = ground("Pendulum-v1", SOURCE, settings, str(path), pendulum_pi0)
         target = gym.make("Pendulum-v1", **TARGET).unwrapped
@@ -301,6 +302,10 @@ def garat_pi0(
             tag += f"_{disc_input}_gp{grad_penalty}"
         if disc_data != "rollouts":
             tag += f"_{disc_data}"
+        if grad_penalty_form != "zero_centred":
+            tag += f"_{grad_penalty_form}"
+        if iterations != "30":
+            tag += f"_it{iterations}"
         print(f"GARAT pi0 ({disc_steps} D steps, {disc_input}, gp {grad_penalty}) seed {seed}: {row}")
         _save(f"{tag}/seed{seed}", row)
 

@@ -15,6 +15,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from rllib_asor.algorithms.gaifo.settings import GRAD_PENALTY_FORMS
+
 LOG2 = math.log(2.0)
 
 
@@ -46,11 +48,34 @@ class TransitionDiscriminator(nn.Module):
         """Logits, shape [N]."""
         return self.net(self.normalize(x)).squeeze(-1)
 
-    def gradient_penalty(self, real: torch.Tensor) -> torch.Tensor:
-        """E‖∇ logit‖² on `real` rows, w.r.t. the normalised input."""
-        z = self.normalize(real).detach().requires_grad_(True)
+    def gradient_penalty(
+        self, real: torch.Tensor, fake: torch.Tensor | None = None, form: str = "zero_centred"
+    ) -> torch.Tensor:
+        """The gradient penalty of `form` (`GRAD_PENALTY_FORMS`), w.r.t. the normalised input:
+        `zero_centred` E‖∇ logit‖² at the `real` rows; `one_centred_mix` E(‖∇ logit‖ − 1)² at
+        mixtures α·real + (1 − α)·fake of the normalised rows, α ~ N(0, 1) per element (the
+        GARAT authors' `compute_grad_pen`, `rl_gat/gat.py`; the mixtures are not clipped)."""
+        if form == "zero_centred":
+            return self._grad(self.normalize(real)).pow(2).sum(-1).mean()
+        if form != "one_centred_mix":
+            raise ValueError(bad_form(form))
+        if fake is None or fake.shape[0] != real.shape[0] or real.shape[0] == 0:
+            return torch.zeros((), device=real.device)
+        z_real, z_fake = self.normalize(real), self.normalize(fake)
+        alpha = torch.randn_like(z_real)
+        grad = self._grad(alpha * z_real + (1 - alpha) * z_fake)
+        return (grad.norm(2, dim=-1) - 1).pow(2).mean()
+
+    def _grad(self, z: torch.Tensor) -> torch.Tensor:
+        """∇_z logit per row of normalised inputs `z` (differentiable in the weights)."""
+        z = z.detach().requires_grad_(True)
         (grad,) = torch.autograd.grad(self.net(z).sum(), z, create_graph=True)
-        return grad.pow(2).sum(-1).mean()
+        return grad
+
+
+def bad_form(form: str) -> str:
+    """The one-line error for an unknown gradient penalty form."""
+    return f"grad_penalty_form={form!r}; allowed: {' | '.join(GRAD_PENALTY_FORMS)}"
 
 
 def discriminator_loss(

@@ -18,6 +18,9 @@ from rllib_asor.settings_model import (
     one_of,
 )
 
+GRAD_PENALTY_FORMS = ("zero_centred", "one_centred_mix")
+"""`grad_penalty_form`'s values (`TransitionDiscriminator.gradient_penalty`)."""
+
 
 class GaifoSettings(BlockSettings):
     """GAIfO's settings."""
@@ -42,7 +45,11 @@ class GaifoSettings(BlockSettings):
     disc_batch_size: IntAtLeast1 = 256
     """Policy transitions per discriminator step (as many expert ones)."""
     grad_penalty: NonNegative = 0.0
-    """Weight of the gradient penalty on expert inputs (0: none)."""
+    """Weight of the discriminator's gradient penalty (0: none); its form `grad_penalty_form`."""
+    grad_penalty_form: one_of(GRAD_PENALTY_FORMS) = "zero_centred"
+    """`zero_centred`: E‖∇ logit‖² at expert inputs; `one_centred_mix`: E(‖∇ logit‖ − 1)² at
+    mixtures α·expert + (1 − α)·policy rows, α ~ N(0, 1) per element (the GARAT authors'
+    `compute_grad_pen`, weight 10 there). Gradients w.r.t. the normalised input."""
     input_norm: bool = True
     """Normalise the discriminator's inputs by the expert rows' mean and std (fixed)."""
     reward_form: one_of(("gail", "airl")) = "gail"

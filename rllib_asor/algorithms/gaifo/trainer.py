@@ -65,7 +65,7 @@ class GaifoTrainer:
                 real = self.expert[self._pick(self.expert.shape[0], n)]
                 loss, stats = gaifo_loss(self.disc(real), self.disc(fake))
                 if s.grad_penalty > 0:
-                    gp = self.disc.gradient_penalty(real)
+                    gp = self.disc.gradient_penalty(real, fake, s.grad_penalty_form)
                     loss = loss + s.grad_penalty * gp
                     stats = {**stats, "disc_grad_penalty": gp.detach()}
                 self.optim.zero_grad(set_to_none=False)

@@ -136,6 +136,7 @@ def _ground(
             disc_lr=s.disc_lr,
             disc_steps=s.disc_steps,
             grad_penalty=s.grad_penalty,
+            grad_penalty_form=s.grad_penalty_form,
             seed=s.seed,
         )
         .debugging(seed=s.seed)

@@ -12,6 +12,7 @@ from typing import Annotated, Any, ClassVar
 
 from pydantic import Field
 
+from rllib_asor.algorithms.gaifo.settings import GRAD_PENALTY_FORMS
 from rllib_asor.settings_model import (
     Allowed,
     BlockSettings,
@@ -81,6 +82,10 @@ class GaratSettings(BlockSettings):
     grounding MDP with the transformer's deterministic Δ, D fixed during the PPO update (the
     authors' `train_discriminator`: `GroundedEnv(use_deterministic=True)`)."""
     grad_penalty: NonNegative = 1.0
-    """Gradient penalty on target inputs (`--compute_grad_penalty`)."""
+    """Weight of the discriminator's gradient penalty (`--compute_grad_penalty`; 0: none)."""
+    grad_penalty_form: one_of(GRAD_PENALTY_FORMS) = "zero_centred"
+    """GAIfO's `grad_penalty_form`: `zero_centred`, E‖∇ logit‖² at target inputs;
+    `one_centred_mix`, the authors' form (`rl_gat/gat.py` `compute_grad_pen`, weight 10):
+    E(‖∇ logit‖ − 1)² at mixtures α·target + (1 − α)·grounded rows, α ~ N(0, 1) per element."""
     seed: int = 0
     """Seed of the grounding run (its env, behaviour actions and networks)."""
