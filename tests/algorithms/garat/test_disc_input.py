@@ -85,26 +85,11 @@ def test_disc_input_is_validated_naming_the_allowed_values(tmp_path):
 
 
 def test_deterministic_rows_step_the_grounding_mdp_with_the_transformers_mean_delta():
-    from ray.rllib.algorithms.ppo.torch.default_ppo_torch_rl_module import (
-        DefaultPPOTorchRLModule,
-    )
-    from ray.rllib.core.rl_module.rl_module import RLModuleSpec
-
     from rllib_asor.algorithms.garat.envs import GroundingEnv, SavedTransformer
     from rllib_asor.algorithms.garat.grounding import deterministic_rows
+    from tests.algorithms.garat.test_garat import delta_one_transformer
 
-    spec = RLModuleSpec(
-        module_class=DefaultPPOTorchRLModule,
-        observation_space=gym.spaces.Box(-10, 10, (4,), np.float32),
-        action_space=gym.spaces.Box(-4, 4, (1,), np.float32),
-        model_config={"fcnet_hiddens": [4]},
-    )
-    module = spec.build()
-    with torch.no_grad():  # Δ = 1 everywhere (its mean); its log-std 0 would sample ±1 more
-        for name, p in module.named_parameters():
-            p.zero_()
-            if name.startswith("pi.") and name.endswith("bias"):
-                p[0] = 1.0
+    spec, module = delta_one_transformer()  # Δ = 1 (its mean; sampling would add ±1 more)
     env = GroundingEnv({"env": "Pendulum-v1", "env_config": {"g": 10.0},
                         "behaviour": lambda s: np.array([0.5], np.float32)})  # fmt: skip
     obs, nxt = deterministic_rows(env, SavedTransformer(spec, module.get_state()), 3, seed=7)

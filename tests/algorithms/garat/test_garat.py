@@ -90,7 +90,9 @@ def test_grounding_env_plays_a_deterministic_behaviour_policy_when_given():
         obs, *_ = env.step(np.zeros(1, np.float32))
 
 
-def test_grounded_env_plays_a_plus_delta_and_without_a_transformer_is_the_source():
+def delta_one_transformer():
+    """A PPO module for the grounding MDP (obs (s, a), Δ ∈ [-4, 4]) whose mean Δ is 1
+    everywhere: every weight 0, the mean head's bias 1. Returns (spec, module)."""
     from ray.rllib.algorithms.ppo.torch.default_ppo_torch_rl_module import (
         DefaultPPOTorchRLModule,
     )
@@ -103,11 +105,16 @@ def test_grounded_env_plays_a_plus_delta_and_without_a_transformer_is_the_source
         model_config={"fcnet_hiddens": [4]},
     )
     module = spec.build()
-    with torch.no_grad():  # Δ = 1 everywhere: the mean head's bias, all weights 0
+    with torch.no_grad():
         for name, p in module.named_parameters():
             p.zero_()
             if name.startswith("pi.") and name.endswith("bias"):
                 p[0] = 1.0
+    return spec, module
+
+
+def test_grounded_env_plays_a_plus_delta_and_without_a_transformer_is_the_source():
+    spec, module = delta_one_transformer()
     saved = {"spec": spec, "state": module.get_state()}
     plain = GroundedEnv({"env": "Pendulum-v1", "env_config": SOURCE})
     grounded = GroundedEnv({"env": "Pendulum-v1", "env_config": SOURCE, "transformer": saved})
