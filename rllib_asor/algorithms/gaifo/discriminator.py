@@ -53,15 +53,17 @@ class TransitionDiscriminator(nn.Module):
     ) -> torch.Tensor:
         """The gradient penalty of `form` (`GRAD_PENALTY_FORMS`), w.r.t. the normalised input:
         `zero_centred` E‖∇ logit‖² at the `real` rows; `one_centred_mix` E(‖∇ logit‖ − 1)² at
-        mixtures α·real + (1 − α)·fake of the normalised rows, α ~ N(0, 1) per element (the
-        GARAT authors' `compute_grad_pen`, `rl_gat/gat.py`; the mixtures are not clipped)."""
+        mixtures α·real + (1 − α)·fake of the normalised rows, paired in order (the first
+        min(len) of each), α ~ N(0, 1) per element (the GARAT authors' `compute_grad_pen`,
+        `rl_gat/gat.py`; the mixtures are not clipped)."""
         if form == "zero_centred":
             return self._grad(self.normalize(real)).pow(2).sum(-1).mean()
         if form != "one_centred_mix":
             raise ValueError(bad_form(form))
-        if fake is None or fake.shape[0] != real.shape[0] or real.shape[0] == 0:
+        n = 0 if fake is None else min(real.shape[0], fake.shape[0])
+        if n == 0:
             return torch.zeros((), device=real.device)
-        z_real, z_fake = self.normalize(real), self.normalize(fake)
+        z_real, z_fake = self.normalize(real[:n]), self.normalize(fake[:n])
         alpha = torch.randn_like(z_real)
         grad = self._grad(alpha * z_real + (1 - alpha) * z_fake)
         return (grad.norm(2, dim=-1) - 1).pow(2).mean()

@@ -57,11 +57,18 @@ def test_one_centred_mix_reads_mixtures_with_normal_weights_per_element():
     assert disc.gradient_penalty(real, form="zero_centred").item() == pytest.approx(9.0)
 
 
-def test_one_centred_mix_without_matching_fake_rows_is_zero():
-    disc = _kinked([3.0, 4.0], b=100.0, v=1.0)
-    real = torch.ones(2, 2, device=DEVICE)
+def test_one_centred_mix_pairs_the_first_rows_of_each_and_is_zero_without_fake_rows():
+    disc = _kinked([3.0, 4.0], b=100.0, v=1.0)  # norm 5 everywhere: (5 − 1)² = 16
+    real = torch.ones(3, 2, device=DEVICE)
     assert disc.gradient_penalty(real, None, "one_centred_mix").item() == 0.0
-    assert disc.gradient_penalty(real, real[:1], "one_centred_mix").item() == 0.0
+    assert disc.gradient_penalty(real, real[:0], "one_centred_mix").item() == 0.0
+    assert disc.gradient_penalty(real, real[:1], "one_centred_mix").item() == pytest.approx(16.0)
+    # z₀ > 0 only on the first real row (norm 3: penalty 4), the mixture with its pair
+    # (z₀ = α·1 + (1 − α)·1 = 1 > 0 whatever α) keeps it there; the third row is never read.
+    kinked = _kinked([1.0, 0.0], b=0.0, v=3.0)
+    real = torch.tensor([[1.0, 0.0], [1.0, 0.0], [-1.0, 0.0]], device=DEVICE)
+    fake = torch.tensor([[1.0, 0.0], [1.0, 0.0]], device=DEVICE)
+    assert kinked.gradient_penalty(real, fake, "one_centred_mix").item() == pytest.approx(4.0)
 
 
 def test_trainer_adds_the_chosen_form_and_reports_it():
