@@ -29,6 +29,7 @@ import numpy as np
 
 from rllib_asor.report.stats import bootstrap_ci
 from studies.lib.common import (
+    round_floats,
     run_method_seed_grid,
     runs_made_otherwise,
     start_local_ray,
@@ -170,7 +171,7 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
         "greedy_return_mean": float(np.mean(list(rows.values()))),
         "escaped_trap": bool(rows[TRAP_ROW] > 0),
         "train_return_last": float(np.nanmean([c[1] for c in curve[-3:]])),
-        "curve": curve,
+        "curve": round_floats(curve),
         "asor_last": {k: float(v) for k, v in result.get("asor", {}).items()},
     }
     if (

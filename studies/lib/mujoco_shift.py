@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from studies.lib.common import mean_std, run_if_missing, start_local_ray
+from studies.lib.common import mean_std, round_floats, run_if_missing, start_local_ray
 
 DEFAULT_METHODS = {
     "sac": ("sac", "srpo:mode=srpo", "asor:mode=asor"),
@@ -211,7 +211,7 @@ def run_one(
         "eval_mean": eval_mean,
         "eval_return_mean": eval_mean,
         "train_return_last": curve[-1][1],
-        "curve": curve,
+        "curve": round_floats(curve),
         "asor_last": stats,
         "settings": {k: getattr(args, k) for k in keys},
     }

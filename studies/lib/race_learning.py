@@ -33,6 +33,7 @@ import numpy as np
 from rllib_asor.evaluation.rollout import module_policy
 from rllib_asor.race.evaluation import COLUMNS, evaluate
 from studies.lib.common import (
+    round_floats,
     run_method_seed_grid,
     runs_made_otherwise,
     start_local_ray,
@@ -181,7 +182,7 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
         "train_wall_s": train_s,
         "eval_wall_s": time.time() - t1,
         "eval": ev,
-        "curve": curve,
+        "curve": round_floats(curve),
         "race_last": {
             k: float(v) for k, v in result.get("race", {}).items() if not isinstance(v, dict)
         },

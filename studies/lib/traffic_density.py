@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from studies.lib.common import run_if_missing, start_local_ray
+from studies.lib.common import round_floats, run_if_missing, start_local_ray
 
 METHODS = {
     "ppo": None,
@@ -112,7 +112,7 @@ def run_one(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
         "eval": ev,
         "eval_return_mean": float(np.mean([v["return"] for v in ev.values()])),
         "train_return_last": curve[-1][1],
-        "curve": curve,
+        "curve": round_floats(curve),
         "asor_last": {k: float(v) for k, v in result.get("asor", {}).items() if np.isscalar(v)},
         "settings": {"steps": args.steps, "batch": args.batch, "eval_episodes": args.eval_episodes},
     }

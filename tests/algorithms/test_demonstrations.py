@@ -63,6 +63,10 @@ def test_npz_with_actions_loads_and_ignores_them(tmp_path):
     ("make", "message"),
     [
         (lambda p: p / "nope.npz", r"nope\.npz do not exist; allowed: an \.npz file"),
+        (
+            lambda p: (p / "make.py").write_text("#") and p / "nope.npz",
+            r"nope\.npz do not exist; write them first: `python .*make\.py`; allowed",
+        ),  # a file that the script beside it writes (tuned_examples/paper/demonstrations/)
         (lambda p: (p / "d.csv").write_text("1,2") and p / "d.csv", r"d\.csv: unknown format"),
         (lambda p: p, r"without manifest\.json or parquet files"),
         (
@@ -96,6 +100,7 @@ def test_npz_with_actions_loads_and_ignores_them(tmp_path):
     ],
     ids=[
         "missing",
+        "missing-with-make-script",
         "unknown-format",
         "empty-dir",
         "empty",

@@ -9,6 +9,7 @@ tests/race and tests/examples.
 
 from __future__ import annotations
 
+import runpy
 from pathlib import Path
 
 import pytest
@@ -18,6 +19,16 @@ from rllib_asor.cli.errors import UsageError
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = sorted((REPO / "tuned_examples").rglob("*.yaml"))
+DEMOS = REPO / "tuned_examples/paper/demonstrations"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _paper_demonstrations():
+    """The paper's sweep files read demonstrations that `make install` writes (make.py beside
+    them); a bare `pytest` writes them here the same way."""
+    names = ("lava-expert.npz", "walker2d-gravity-random.npz", "halfcheetah-damping-random.npz")
+    if not all((DEMOS / n).exists() for n in names):
+        runpy.run_path(str(DEMOS / "make.py"), run_name="__main__")
 
 
 def test_there_are_examples_of_every_kind():

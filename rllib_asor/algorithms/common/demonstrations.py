@@ -110,7 +110,11 @@ def load_demonstrations(path: str | os.PathLike[str], observation_space: Any) ->
     """
     p = Path(path)
     if not p.exists():
-        hint = "; make the offline datasets first: `make datasets`" if "offline" in p.parts else ""
+        hint = ""
+        if "offline" in p.parts:
+            hint = "; make the offline datasets first: `make datasets`"
+        elif (p.parent / "make.py").is_file():
+            hint = f"; write them first: `python {p.parent / 'make.py'}`"
         raise ValueError(f"demonstrations {p} do not exist{hint}; {ALLOWED}")
     if p.is_file() and p.suffix == ".npz":
         demos = _read_npz(p)

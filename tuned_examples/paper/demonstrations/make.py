@@ -1,4 +1,5 @@
-"""Writes the demonstrations the paper's sweep files read (small, committed beside this file).
+"""Writes the demonstrations the paper's sweep files read, beside this file (`make install` runs it;
+the files are not in git: this script writes them bit for bit the same in a few seconds).
 
     python tuned_examples/paper/demonstrations/make.py
 
