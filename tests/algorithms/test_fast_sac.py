@@ -375,6 +375,9 @@ def test_sac_asor_with_one_aux_minibatch_per_call_learns_pendulum(ray_session):
     assert np.mean(default) > np.mean(every) - (2 * spread + 100)
 
 
+# ~30 s, `make test-slow`: SAC+ASOR on remote Learner actors (and their restore) is
+# tests/cluster/test_many_learners.py[sac]; the flat buffer feeding them is tested locally here.
+@pytest.mark.slow
 def test_fast_sac_asor_trains_on_a_remote_learner(ray_session):
     """FlatTransitions travel to a Learner actor (num_learners=1) like episodes do.
     (2 DDP Learners with ASOR fail on RLlib's stock path as well: docs/algorithm.md.)"""

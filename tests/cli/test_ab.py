@@ -122,6 +122,30 @@ def test_ab_on_a_users_env_with_changing_dynamics(
     text = capsys.readouterr().out
     assert text.startswith(f"4 trials under {exp}: evaluating the newest checkpoint of each")
     assert text.count("checkpoint: ") == 4 and text.count("return per dynamics_id: ") == 4
+    # The same name with a changed setting is refused, naming the change and the ways out.
+    write_yaml(YAML.replace("num_epochs: 1", "num_epochs: 2"), "varpole.yaml")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "num_epochs: 1 -> 2" in err and "--name" in err and "--fresh" in err
+    assert len(list(exp.rglob("result.json"))) == 4
+
+
+# ~70 s, `make test-slow`: a rerun of the same `rllib train` experiment resumes
+# (tests/cli/test_experiment_folder.py, the same manifest code); a changed `ab` is refused above.
+@pytest.mark.slow
+def test_ab_rerun_resumes_and_more_seeds_add_pairs(
+    my_env: str,
+    tmp_path: Path,
+    write_yaml: Callable[..., str],
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    path = write_yaml(YAML, "varpole.yaml")
+    store = tmp_path / "results"
+    argv = ["ab", path, "--seeds", "2", "--episodes", "6", "--storage-path", str(store)]
+    assert main(argv) == 0
+    capsys.readouterr()
+    exp = store / "varpole-ab"
+    trials = sorted(p.parent for p in exp.rglob("result.json"))
 
     # A rerun resumes: nothing trains again, the evaluations are kept.
     before = [(t / "evaluation.json").stat().st_mtime_ns for t in trials]
@@ -136,12 +160,6 @@ def test_ab_on_a_users_env_with_changing_dynamics(
     now = sorted(p.parent for p in exp.rglob("result.json"))
     assert len(now) == 6 and set(trials) <= set(now)
     assert [(t / "evaluation.json").stat().st_mtime_ns for t in trials] == before
-    # The same name with a changed setting is refused, naming the change and the ways out.
-    write_yaml(YAML.replace("num_epochs: 1", "num_epochs: 2"), "varpole.yaml")
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "num_epochs: 1 -> 2" in err and "--name" in err and "--fresh" in err
-    assert len(list(exp.rglob("result.json"))) == 6
 
 
 def test_ab_bad_input_is_one_line(

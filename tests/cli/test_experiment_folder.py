@@ -110,7 +110,9 @@ def test_test_runs_go_to_their_own_folder_marked_smoke(tmp_path: Path, cli_ray: 
     path = tmp_path / "tiny.yaml"
     path.write_text(TINY.format(lr=0.0003))
     store = tmp_path / "results"
-    res = run_cli(["train", "file", str(path), "--test", "--storage-path", str(store)])
+    # No remote runners (two more processes to start): the folder is what this test checks.
+    res = run_cli(["train", "file", str(path), "--test", "--num-env-runners", "0",
+                   "--storage-path", str(store)])  # fmt: skip
     assert res.rc == 0, res.err[-2000:]
     assert not (store / "tiny").exists()
     [trial] = _trials(store / "tiny-test")

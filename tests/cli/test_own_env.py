@@ -88,6 +88,10 @@ def test_every_way_of_naming_the_env_validates(user):
         assert f"form{i}:\n  env: {name}\n" in proc.stdout, proc.stdout
 
 
+# ~70 s, `make test-slow`: `module:Id` trained with --test and evaluated is
+# test_env_modules.py's `trained`; a remote runner importing the user's module from PYTHONPATH
+# is the script test below; per-dynamics evaluation output is test_ab.py's.
+@pytest.mark.slow
 def test_own_env_by_module_and_id_trains_with_test_and_is_evaluated(user):
     root, env = user
     results = root / "results"

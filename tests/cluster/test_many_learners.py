@@ -98,7 +98,16 @@ def _local_sampling(make: Any) -> Any:
     return make().env_runners(num_env_runners=0)
 
 
-@pytest.mark.parametrize("make", [_ppo, _sac, _escp], ids=["ppo", "sac", "escp"])
+@pytest.mark.parametrize(
+    "make",
+    [
+        pytest.param(_ppo, id="ppo"),
+        pytest.param(_sac, id="sac"),
+        # ~60 s, `make test-slow`: ESCP's Learner adds its encoder to SAC's; the ASOR state
+        # across two DDP Learners is [sac]'s path (AsorTrainer, tests/asor/test_trainer_ddp.py).
+        pytest.param(_escp, id="escp", marks=pytest.mark.slow),
+    ],
+)
 def test_asor_trains_on_two_learners_with_one_state(make, ray_session, tmp_path):
     algo = _local_sampling(make).build_algo()
     try:

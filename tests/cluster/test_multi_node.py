@@ -62,6 +62,9 @@ def _runner_nodes(algo) -> list[str]:
         lambda r: ray.get_runtime_context().get_node_id(), local_env_runner=False)
 
 
+# ~50 s, `make test-slow`: a lost runner restarted and training going on is
+# tests/cluster/test_faults.py's env crash; joining a cluster of nodes is the CLI test below.
+@pytest.mark.slow
 def test_node_removed_mid_run_training_continues_and_runner_restarts_on_new_node(cluster):
     config = with_fault_tolerance(
         lava_ppo_asor(custom_resources_per_env_runner={SLOT: 1}),

@@ -25,7 +25,15 @@ def sac_config(env):
     )
 
 
-@pytest.mark.parametrize(("env", "proxy"), [("Pendulum-v1", "ensemble"), ("CartPole-v1", "rnd")])
+@pytest.mark.parametrize(
+    ("env", "proxy"),
+    [
+        # ~20 s, `make test-slow`: the ensemble proxy's training and scores are
+        # tests/asor/test_proxy_behaviour.py's, SAC+ASOR on Pendulum test_many_learners[sac].
+        pytest.param("Pendulum-v1", "ensemble", marks=pytest.mark.slow),
+        ("CartPole-v1", "rnd"),
+    ],
+)
 def test_sac_asor_update_trains_aux_and_values_come_from_critics(ray_session, env, proxy):
     algo = rllib_asor.with_asor(sac_config(env), lambda_=0.05, proxy=proxy).build_algo()
     try:
