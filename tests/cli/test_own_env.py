@@ -88,9 +88,9 @@ def test_every_way_of_naming_the_env_validates(user):
         assert f"form{i}:\n  env: {name}\n" in proc.stdout, proc.stdout
 
 
-# ~70 s, `make test-slow`: `module:Id` trained with --test and evaluated is
-# test_env_modules.py's `trained`; a remote runner importing the user's module from PYTHONPATH
-# is the script test below; per-dynamics evaluation output is test_ab.py's.
+# ~70 s, `make test-slow`: `module:Id` trained with --test (a remote runner importing the
+# user's module) and evaluated is test_env_modules.py's `trained`; per-dynamics evaluation
+# output is test_ab.py's; the module on PYTHONPATH resolves in the dry-run test above.
 @pytest.mark.slow
 def test_own_env_by_module_and_id_trains_with_test_and_is_evaluated(user):
     root, env = user
@@ -114,6 +114,10 @@ def test_own_env_class_path_trains_with_test(user):
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
 
 
+# ~60 s, `make test-slow`: a remote runner importing the user's module is
+# test_env_modules.py's `trained`; `with_asor` on remote runners with a registered id is
+# tests/rllib/test_ppo_asor.py::test_with_asor_makes_our_env_ids_buildable_on_remote_env_runners.
+@pytest.mark.slow
 def test_python_script_registers_its_env_and_trains_with_asor(user):
     root, env = user
     script = root / "work" / "train_mine.py"
