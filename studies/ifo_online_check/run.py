@@ -242,23 +242,25 @@ def _returns(env, act, episodes: int = 20) -> float:
 def garat_pi0(
     disc_steps: str = "5", disc_input: str = "s_next", grad_penalty: str = "1",
     disc_data: str = "rollouts", grad_penalty_form: str = "zero_centred", iterations: str = "30",
+    target_g: str = "12",
 ) -> None:
     """Run 2 (run 3: `disc_steps` 50; run 4: 50, `disc_input` s_a_delta, `grad_penalty` 0;
     run 5: run 4 with `disc_data` deterministic; run 6: run 5 with `grad_penalty` 10 of form
-    one_centred_mix and 80 iterations; run 7: run 5 with 80 iterations): the grounding under a
-    deterministic π₀ (README.md)."""
+    one_centred_mix and 80 iterations; run 7: run 5 with 80 iterations; run 8: run 5 with the
+    target's gravity 20): the grounding under a deterministic π₀ (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
     from rllib_asor.algorithms.garat.settings import GaratSettings
 
-    path = HERE / "pendulum-g12-pi0.npz"
+    target_kwargs = {"g": float(target_g)}
+    path = HERE / f"pendulum-g{target_g}-pi0.npz"
     save_demonstrations(
-        path, rollout_demonstrations(pendulum_pi0, "Pendulum-v1", 20, env_kwargs=TARGET)
+        path, rollout_demonstrations(pendulum_pi0, "Pendulum-v1", 20, env_kwargs=target_kwargs)
     )
     demos = load_demonstrations(path, gym.make("Pendulum-v1").observation_space)
-    _save("garat_pi0/pi0", {
-        "target": _returns(gym.make("Pendulum-v1", **TARGET), pendulum_pi0),
+    _save("garat_pi0/pi0" + ("" if target_g == "12" else f"_g{target_g}"), {
+        "target": _returns(gym.make("Pendulum-v1", **target_kwargs), pendulum_pi0),
         "source": _returns(gym.make("Pendulum-v1", **SOURCE), pendulum_pi0),
     })
     rng = np.random.default_rng(0)
@@ -271,7 +273,7 @@ def garat_pi0(
             disc_data=disc_data, grad_penalty_form=grad_penalty_form,
         )
         transformer, stats = ground("Pendulum-v1", SOURCE, settings, str(path), pendulum_pi0)
-        target = gym.make("Pendulum-v1", **TARGET).unwrapped
+        target = gym.make("Pendulum-v1", **target_kwargs).unwrapped
         source = gym.make("Pendulum-v1", **SOURCE).unwrapped
         cfg = {"env": "Pendulum-v1", "env_config": SOURCE, "transformer": transformer}
         grounded = GroundedEnv(cfg)
@@ -306,6 +308,8 @@ def garat_pi0(
             tag += f"_{grad_penalty_form}"
         if iterations != "30":
             tag += f"_it{iterations}"
+        if target_g != "12":
+            tag += f"_g{target_g}"
         print(f"GARAT pi0 ({disc_steps} D steps, {disc_input}, gp {grad_penalty}) seed {seed}: {row}")
         _save(f"{tag}/seed{seed}", row)
 
