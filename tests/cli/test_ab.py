@@ -78,18 +78,22 @@ def my_env(tmp_path: Path, cli_ray: None) -> str:
     return "MyVarPole-v0"
 
 
+def _ab_two_seeds(write_yaml: Callable[..., str], store: Path) -> tuple[list[str], Path]:
+    """`rllib ab` of YAML with 2 paired seeds into `store`: (its argv, the experiment folder)."""
+    argv = ["ab", write_yaml(YAML, "varpole.yaml"), "--seeds", "2", "--episodes", "6",
+            "--storage-path", str(store)]  # fmt: skip
+    assert main(argv) == 0
+    return argv, store / "varpole-ab"
+
+
 def test_ab_on_a_users_env_with_changing_dynamics(
     my_env: str,
     tmp_path: Path,
     write_yaml: Callable[..., str],
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    path = write_yaml(YAML, "varpole.yaml")
-    store = tmp_path / "results"
-    argv = ["ab", path, "--seeds", "2", "--episodes", "6", "--storage-path", str(store)]
-    assert main(argv) == 0
+    argv, exp = _ab_two_seeds(write_yaml, tmp_path / "results")
     out = capsys.readouterr().out
-    exp = store / "varpole-ab"
     trials = sorted(p.parent for p in exp.rglob("result.json"))
     assert len(trials) == 4
     # Greedy evaluation during training, per dynamics id, through RLlib's evaluation runners.
@@ -139,12 +143,8 @@ def test_ab_rerun_resumes_and_more_seeds_add_pairs(
     write_yaml: Callable[..., str],
     capsys: pytest.CaptureFixture[str],
 ) -> None:
-    path = write_yaml(YAML, "varpole.yaml")
-    store = tmp_path / "results"
-    argv = ["ab", path, "--seeds", "2", "--episodes", "6", "--storage-path", str(store)]
-    assert main(argv) == 0
+    argv, exp = _ab_two_seeds(write_yaml, tmp_path / "results")
     capsys.readouterr()
-    exp = store / "varpole-ab"
     trials = sorted(p.parent for p in exp.rglob("result.json"))
 
     # A rerun resumes: nothing trains again, the evaluations are kept.
