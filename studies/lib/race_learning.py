@@ -181,7 +181,8 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
         "steps": steps,
         "train_wall_s": train_s,
         "eval_wall_s": time.time() - t1,
-        "eval": ev,
+        # the per-episode records and the curve are raw data (tables read `per_map`, exact)
+        "eval": {**ev, "episodes": round_floats(ev["episodes"])},
         "curve": round_floats(curve),
         "race_last": {
             k: float(v) for k, v in result.get("race", {}).items() if not isinstance(v, dict)
