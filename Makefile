@@ -54,10 +54,9 @@ smoke: $(STAMP)
 
 # Two pytest workers (pytest-xdist): on 2 cores most tests wait on Ray and RLlib start-ups, so two
 # at once finish the suite in about two thirds of the time. TEST_WORKERS=0 runs them one by one.
-# `--dist loadgroup`: the tests sharing a costly fixture run on one worker (tests/conftest.py).
 TEST_WORKERS ?= 2
 test: $(STAMP) $(DEMOS)
-	$(PY) -m pytest -q --timeout=900 --durations=30 -n $(TEST_WORKERS) --dist loadgroup
+	$(PY) -m pytest -q --timeout=900 --durations=30 -n $(TEST_WORKERS)
 
 # The `slow` tests: long end-to-end runs, and runs whose behaviour a faster test in `make test`
 # covers (each names it). About half an hour on 2 cores.

@@ -55,28 +55,3 @@ def hopper_offline_data(ray_session, tmp_path_factory) -> Path:
         train_steps=0,
         log=lambda *_: None,
     )
-
-
-# Fixtures built once per test run that `make test`'s two workers would otherwise each build.
-SHARED_SESSION_FIXTURES = ("hopper_offline_data",)
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """One pytest-xdist worker per costly shared fixture (`--dist loadgroup`, see Makefile):
-    the tests of a module that share one of its module-scoped fixtures run on one worker, and
-    so do all the users of a shared session fixture, so each fixture is built once, not once
-    per worker (the two-process gloo group of test_many_learner_glue.py was built twice)."""
-    for item in items:
-        info = getattr(item, "_fixtureinfo", None)
-        if info is None:
-            continue
-        names = set(info.names_closure)
-        shared = sorted(names.intersection(SHARED_SESSION_FIXTURES))
-        if shared:
-            item.add_marker(pytest.mark.xdist_group(shared[0]))
-            continue
-        path = item.nodeid.split("::")[0]
-        defs = [d for name in info.names_closure for d in info.name2fixturedefs.get(name, ())]
-        if any(d.scope == "module" and d.baseid == path for d in defs):
-            item.add_marker(pytest.mark.xdist_group(path))
