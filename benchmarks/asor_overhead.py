@@ -19,6 +19,9 @@ import numpy as np
 
 from benchmarks.common import start_local_ray
 
+TARGET = 0.85
+"""PPO+ASOR ÷ PPO env steps/s on the lava world (the ratio of the medians): ASOR's cost target."""
+
 
 def build(env: str, asor: bool, args: argparse.Namespace) -> Any:
     """The benchmark's PPO (or PPO+ASOR) algorithm."""
@@ -93,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         "steps_per_s_median": med,
         "ratio_of_medians": ratio,
         "paired_ratio_median": float(np.median(paired)),
-        "target": 0.8,
+        "target": TARGET,
         "rates": rates,
     }
     out = Path(args.out)
@@ -104,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         "| env | env runners | PPO steps/s | PPO+ASOR steps/s | ratio (medians) | paired ratio | target |\n"
         "|---|---|---|---|---|---|---|\n"
         f"| {args.env} | {args.env_runners} | {med['PPO']:.0f} | {med['PPO+ASOR']:.0f} | {ratio:.2f} | "
-        f"{np.median(paired):.2f} | ≥ 0.8 |\n"
+        f"{np.median(paired):.2f} | ≥ {TARGET} |\n"
     )
     (out / f"{tag}.md").write_text(md)
     print(md)
