@@ -3,7 +3,7 @@
     python -m benchmarks.gpu_check_summary benchmarks/out/gpu_check
 
 Reads OUT/gpu_tests.xml (pytest's junit report), OUT/e2e/scaling.json (sampling and end to
-end), OUT/learner/scaling.json (the Learner alone) and OUT/split/scaling.json (where an
+end), OUT/overlap/scaling.json (end to end with overlapped sampling), OUT/learner/scaling.json (the Learner alone) and OUT/split/scaling.json (where an
 iteration's time goes, and the weight sync), all from `benchmarks.scaling` at minibatch
 2,048; a missing file is a row or a line that says so. The
 targets are those for a 16-core node with one GPU: at the most runners (14) PPO+ASOR
@@ -20,7 +20,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
-LABELS = {"ppo": "PPO", "asor": "PPO+ASOR"}
+from benchmarks.scaling import LABELS
 
 
 def test_counts(xml: Path) -> str:
@@ -51,11 +51,16 @@ def fmt(x: float | None, digits: int = 0) -> str:
     return "—" if x is None else f"{x:,.{digits}f}"
 
 
-def targets(e2e: dict[str, Any] | None, learner: dict[str, Any] | None) -> list[list[str]]:
+def targets(
+    e2e: dict[str, Any] | None,
+    learner: dict[str, Any] | None,
+    overlap: dict[str, Any] | None = None,
+) -> list[list[str]]:
     """Rows (check, measured, target, verdict) of the GPU node's targets (a 16-core
-    node with one GPU, 14 runners)."""
+    node with one GPU, 14 runners); with `overlap`, the end-to-end targets again for
+    overlapped sampling."""
     counts = sorted({r["runners"] for r in (e2e or {}).get("rows", [])})
-    cuda = (e2e or learner or {}).get("settings", {}).get("device") == "cuda"
+    cuda = (e2e or learner or overlap or {}).get("settings", {}).get("device") == "cuda"
     rows = []
     if counts:
         lo, hi = counts[0], counts[-1]
@@ -85,6 +90,18 @@ def targets(e2e: dict[str, Any] | None, learner: dict[str, Any] | None) -> list[
              sample_many, 30_000.0],
             ["Learner alone, best (env steps/s)", fmt(best), "≥ 10,000", best, 10_000.0],
         ]  # fmt: skip
+    over = sorted({r["runners"] for r in (overlap or {}).get("rows", [])})
+    if over:
+        n = over[-1]
+        ao, po = rate(overlap, "asor_overlap", n, "e2e"), rate(overlap, "ppo_overlap", n, "e2e")
+        rel = ao / po if ao and po else None
+        rows += [
+            [f"PPO+ASOR overlapped end to end, {n} runners (env steps/s)", fmt(ao), "≥ 15,000",
+             ao, 15_000.0],
+            [f"PPO overlapped end to end, {n} runners (env steps/s)", fmt(po), "≥ 16,000", po,
+             16_000.0],
+            [f"PPO+ASOR ÷ PPO overlapped, {n} runners", fmt(rel, 2), "≥ 0.9", rel, 0.9],
+        ]  # fmt: skip
     out = []
     for check, shown, target, value, bar in rows:
         if not cuda:
@@ -100,11 +117,13 @@ def targets(e2e: dict[str, Any] | None, learner: dict[str, Any] | None) -> list[
 def main(argv: list[str] | None = None) -> int:
     out = Path((argv if argv is not None else sys.argv[1:])[0])
     e2e, learner = load(out / "e2e" / "scaling.json"), load(out / "learner" / "scaling.json")
+    overlap = load(out / "overlap" / "scaling.json")
     lines = ["", "| check | measured | target | verdict |", "|---|---|---|---|"]
     lines.append(
         f"| gpu tests (`pytest -m gpu`) | {test_counts(out / 'gpu_tests.xml')} | all pass | |"
     )
-    for name, res in (("sampling and end to end", e2e), ("Learner alone", learner)):
+    parts = (("sampling and end to end", e2e), ("overlapped", overlap), ("Learner alone", learner))
+    for name, res in parts:
         if res is None:
             lines.append(f"| scaling benchmark, {name} | no result (see its log) | | |")
             continue
@@ -130,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
             lines.append(
                 f"| note | {name}: stopped by its time limit; what it measured is above | | |"
             )
-    for check, shown, target, verdict in targets(e2e, learner):
+    for check, shown, target, verdict in targets(e2e, learner, overlap):
         lines.append(f"| {check} | {shown} | {target} | {verdict} |")
     split = load(out / "split" / "scaling.json")
     if split is None:

@@ -45,9 +45,17 @@ import time
 from pathlib import Path
 from typing import Any
 
-ALGOS = ("ppo", "asor")
+ALGOS = ("ppo", "asor", "ppo_overlap", "asor_overlap")
 PARTS = ("learner", "sample", "e2e", "tune", "split", "sync")
-LABELS = {"ppo": "PPO", "asor": "PPO+ASOR"}
+LABELS = {
+    "ppo": "PPO",
+    "asor": "PPO+ASOR",
+    "ppo_overlap": "PPO overlapped",
+    "asor_overlap": "PPO+ASOR overlapped",
+}
+OVERLAP = "_overlap"
+"""An algorithm name's suffix for `OverlappedPPO` (the runners sample batch k+1 while the
+Learner trains on batch k, its lag corrected: rllib_asor/algorithms/ppo/overlap.py)."""
 
 
 # ---------------------------------------------------------------------------- arguments
@@ -81,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--device", default="cpu", help="the Learner's device: cpu or cuda")
     p.add_argument("--runners", default="1,2,4,8,14", help="env-runner counts (comma list)")
-    p.add_argument("--algos", default="ppo,asor", help="comma list of ppo, asor")
+    p.add_argument("--algos", default="ppo,asor", help="comma list of " + ", ".join(ALGOS))
     p.add_argument("--parts", default=",".join(PARTS), help="comma list of " + ",".join(PARTS))
     p.add_argument("--quick", action="store_true", help="fewer batches and iterations (minutes)")
     p.add_argument("--envs-per-runner", type=int, default=8)
@@ -164,7 +172,8 @@ def settle(args: argparse.Namespace) -> argparse.Namespace:
 # ---------------------------------------------------------------------------- configs
 def race_config(algo: str, args: argparse.Namespace, runners: int, seed: int = 0) -> Any:
     """Race PPO (`algo="ppo"`) or PPO+ASOR's robust default (`"asor"`), as
-    tuned_examples/race/ppo(-asor).yaml but with `runners` runners and the batch they make."""
+    tuned_examples/race/ppo(-asor).yaml but with `runners` runners and the batch they make;
+    `"ppo_overlap"` / `"asor_overlap"` the same with overlapped sampling."""
     import rllib_asor
     from rllib_asor.race.config import RACE_ASOR_OBS_KEYS, race_ppo_config
 
@@ -195,7 +204,11 @@ def race_config(algo: str, args: argparse.Namespace, runners: int, seed: int = 0
         from rllib_asor.algorithms.ppo.lean import drop_bootstrap_rows
 
         config = drop_bootstrap_rows(config)
-    if algo == "asor":
+    if algo.endswith(OVERLAP):
+        from rllib_asor.algorithms.ppo.overlap import overlap_sampling
+
+        config = overlap_sampling(config)
+    if algo.removesuffix(OVERLAP) == "asor":
         config = rllib_asor.with_asor(config, mode="asor", obs_keys=list(RACE_ASOR_OBS_KEYS))
     return config
 
@@ -405,11 +418,11 @@ def measure_tune(algo: str, args: argparse.Namespace) -> float:
 
     from rllib_asor.rllib.trainable import asor_trainable
 
-    base = race_config("ppo", args, 1)
+    base = race_config(algo.replace("asor", "ppo"), args, 1)
     if args.device == "cuda":  # the trials share the one GPU
         base = base.learners(num_gpus_per_learner=1 / args.trials)
     space = base.to_dict() | {"seed": tune.grid_search(list(range(args.trials)))}
-    if algo == "asor":
+    if algo.removesuffix(OVERLAP) == "asor":
         from rllib_asor.race.config import RACE_ASOR_OBS_KEYS
 
         space["asor"] = {"mode": "asor", "obs_keys": list(RACE_ASOR_OBS_KEYS)}
@@ -601,7 +614,7 @@ def split_table(split: dict[str, Any]) -> str:
         a: {k: statistics.median(it[k] for it in iters[a]) for k, *_ in SPLIT_ROWS} for a in algos
     }
     head = "| part (ms per iteration, median) | " + " | ".join(LABELS[a] for a in algos)
-    both = len(algos) == 2
+    both = "ppo" in algos and "asor" in algos
     lines = [
         head + (" | PPO+ASOR − PPO | Δ ÷ PPO's iteration |" if both else " |"),
         "|---" * (len(algos) + 1 + 2 * both) + "|",

@@ -7,13 +7,13 @@
 # rest goes on. Usage:  scripts/gpu_check.sh   or   make gpu-check
 # Knobs: GPU_CHECK_OUT (default benchmarks/out/gpu_check), GPU_CHECK_TEST_S (240),
 # GPU_CHECK_BENCH_S (200; 420 without CUDA), GPU_CHECK_LEARNER_S (90; 120 without CUDA),
-# GPU_CHECK_SPLIT_S (180; 420 without CUDA),
-# GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without).
+# GPU_CHECK_OVERLAP_S (120; 300 without CUDA), GPU_CHECK_SPLIT_S (180; 420 without CUDA): a
+# limit of 0 skips its step. GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without).
 set -u
 cd "$(dirname "$0")/.."
 out=${GPU_CHECK_OUT:-benchmarks/out/gpu_check}
 mkdir -p "$out"
-rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/e2e "$out"/split
+rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/e2e "$out"/overlap "$out"/split
 if [ -x .venv/bin/python ]; then py=${PYTHON:-.venv/bin/python}; else py=${PYTHON:-python3}; fi
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} RAY_memory_monitor_refresh_ms=0 \
   RAY_DISABLE_DOCKER_CPU_WARNING=1 RAY_USAGE_STATS_ENABLED=0 PYTHONUNBUFFERED=1
@@ -27,17 +27,22 @@ if ! "$py" -c "import torch" 2>/dev/null; then
 fi
 cuda=$("$py" -c "import torch; print(int(torch.cuda.is_available()))")
 if [ "$cuda" = 1 ]; then
-  device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=200; learner_s=90; split_s=180
+  device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=200; learner_s=90; overlap_s=120
+  split_s=180
 else  # a CPU machine checks the script itself: slower, so longer limits
-  device=cpu; runners=${GPU_CHECK_RUNNERS:-1,2}; bench_s=420; learner_s=120; split_s=420
+  device=cpu; runners=${GPU_CHECK_RUNNERS:-1,2}; bench_s=420; learner_s=120; overlap_s=300
+  split_s=420
   echo "gpu-check: torch sees no CUDA device: the gpu tests skip, the benchmark runs on the CPU"
 fi
 test_s=${GPU_CHECK_TEST_S:-240}; bench_s=${GPU_CHECK_BENCH_S:-$bench_s}
 learner_s=${GPU_CHECK_LEARNER_S:-$learner_s}; split_s=${GPU_CHECK_SPLIT_S:-$split_s}
+overlap_s=${GPU_CHECK_OVERLAP_S:-$overlap_s}
+skip() { [ "$1" = 0 ] && echo "gpu-check: skipped $2 (its limit is 0)"; }
 
 # 1. The gpu-marked tests: only the files that hold them (collecting the whole suite would
 #    import modules whose extras, e.g. highway-env, an offline kit does not carry).
-if "$py" -c "import pytest" 2>/dev/null; then
+if skip "$test_s" "the gpu tests"; then :
+elif "$py" -c "import pytest" 2>/dev/null; then
   files=$(grep -rl --include='*.py' "pytest.mark.gpu" tests | sort)
   echo "gpu-check: pytest -m gpu on $(echo $files | wc -w) files (at most $test_s s)"
   # shellcheck disable=SC2086
@@ -52,24 +57,40 @@ fi
 # 2. The Learner alone on the most runners' batches at the scale example's minibatch (2,048;
 #    at 256 a GPU Learner is the wall: its cost per minibatch hardly depends on the rows).
 last=${runners##*,}
-echo "gpu-check: Learner alone, minibatch 2048, $last runners' batches (at most $learner_s s)"
-timeout -k 10 "$learner_s" "$py" -m benchmarks.scaling --quick --device "$device" \
-  --runners "$last" --parts learner --minibatch 2048 --out "$out/learner" > "$out/learner.log" 2>&1
-echo "gpu-check: benchmark exit $? (log: $out/learner.log)"
+if ! skip "$learner_s" "the Learner alone"; then
+  echo "gpu-check: Learner alone, minibatch 2048, $last runners' batches (at most $learner_s s)"
+  timeout -k 10 "$learner_s" "$py" -m benchmarks.scaling --quick --device "$device" \
+    --runners "$last" --parts learner --minibatch 2048 --out "$out/learner" > "$out/learner.log" 2>&1
+  echo "gpu-check: benchmark exit $? (log: $out/learner.log)"
+fi
 
 # 3. Sampling and end to end, PPO and PPO+ASOR, fewest and most runners, minibatch 2,048.
-echo "gpu-check: benchmarks.scaling --device $device --runners $runners, sampling and end to end (at most $bench_s s)"
-timeout -k 10 "$bench_s" "$py" -m benchmarks.scaling --quick --device "$device" \
-  --runners "$runners" --parts sample,e2e --minibatch 2048 --out "$out/e2e" > "$out/e2e.log" 2>&1
-echo "gpu-check: benchmark exit $? (log: $out/e2e.log)"
+if ! skip "$bench_s" "sampling and end to end"; then
+  echo "gpu-check: benchmarks.scaling --device $device --runners $runners, sampling and end to end (at most $bench_s s)"
+  timeout -k 10 "$bench_s" "$py" -m benchmarks.scaling --quick --device "$device" \
+    --runners "$runners" --parts sample,e2e --minibatch 2048 --out "$out/e2e" > "$out/e2e.log" 2>&1
+  echo "gpu-check: benchmark exit $? (log: $out/e2e.log)"
+fi
+
+# 3b. End to end with overlapped sampling (the runners sample batch k+1 while the Learner
+#     trains on batch k; rllib_asor/algorithms/ppo/overlap.py) at the most runners.
+if ! skip "$overlap_s" "the overlapped end to end"; then
+  echo "gpu-check: benchmarks.scaling --algos ppo_overlap,asor_overlap --runners $last, end to end (at most $overlap_s s)"
+  timeout -k 10 "$overlap_s" "$py" -m benchmarks.scaling --quick --device "$device" \
+    --runners "$last" --algos ppo_overlap,asor_overlap --parts e2e --minibatch 2048 \
+    --out "$out/overlap" > "$out/overlap.log" 2>&1
+  echo "gpu-check: benchmark exit $? (log: $out/overlap.log)"
+fi
 
 # 4. Where an iteration's time goes, PPO beside PPO+ASOR (built side by side, iterations
 #    interleaved) at the most runners, and the weight sync to that many runners alone.
-echo "gpu-check: benchmarks.scaling --parts split,sync --runners $last (at most $split_s s)"
-timeout -k 10 "$split_s" "$py" -m benchmarks.scaling --quick --device "$device" \
-  --runners "$last" --sync-runners "$last" --parts split,sync --minibatch 2048 \
-  --out "$out/split" > "$out/split.log" 2>&1
-echo "gpu-check: benchmark exit $? (log: $out/split.log)"
+if ! skip "$split_s" "the split"; then
+  echo "gpu-check: benchmarks.scaling --parts split,sync --runners $last (at most $split_s s)"
+  timeout -k 10 "$split_s" "$py" -m benchmarks.scaling --quick --device "$device" \
+    --runners "$last" --sync-runners "$last" --parts split,sync --minibatch 2048 \
+    --out "$out/split" > "$out/split.log" 2>&1
+  echo "gpu-check: benchmark exit $? (log: $out/split.log)"
+fi
 
 # 5. One table.
 "$py" -m benchmarks.gpu_check_summary "$out"
