@@ -455,11 +455,12 @@ SPLIT_ROWS = (
     ("learner_update", "Learner update (`timers/learner_update_timer`)", 1),
     ("asor_piece", "Learner connector: ASOR's piece (`asor_reward_connector`)", 2),
     ("asor_batch", "features, V(s) of the batch (`_asor_batch`, our timer)", 3),
-    ("asor_update", "archive, ranking, bonus, disc/RND batches (`asor_update`, our timer)", 3),
+    ("asor_rank", "archive, ranking, bonus (`AsorTrainer.rank`, our timer)", 3),
+    ("asor_learn", "disc and proxy training (`AsorTrainer.learn`, our timer)", 3),
     ("asor_rest", "rewards written, metrics logged", 3),
     ("gae", "Learner connector: GAE", 2),
     ("connector_rest", "Learner connector: the rest (episodes → batch, to torch)", 2),
-    ("update", "update: the minibatches (policy, critic, disc, RND)", 2),
+    ("update", "update: the minibatches (policy, critic)", 2),
     ("learner_reduce", "the Learner's metrics reduce (our timer)", 2),
     ("update_other", "LearnerGroup around it, results aggregated", 2),
     ("weight_sync", "weight sync to the runners (`timers/synch_weights`)", 1),
@@ -504,11 +505,13 @@ def _own_timer(name: str, fn: Any) -> Any:
 
 def install_own_timers() -> None:
     """Our timers inside ASOR's Learner-connector piece (idempotent; this process only)."""
-    from rllib_asor.rllib import connector
+    from rllib_asor.asor.trainer import AsorTrainer
+    from rllib_asor.rllib.connector import AsorRewardConnector
 
-    if not getattr(connector.asor_update, "__wrapped_by_scaling__", False):
-        connector.asor_update = _own_timer("asor_update", connector.asor_update)
-        cls = connector.AsorRewardConnector
+    if not getattr(AsorTrainer.rank, "__wrapped_by_scaling__", False):
+        AsorTrainer.rank = _own_timer("asor_rank", AsorTrainer.rank)
+        AsorTrainer.learn = _own_timer("asor_learn", AsorTrainer.learn)
+        cls = AsorRewardConnector
         cls._asor_batch = _own_timer("asor_batch", cls._asor_batch)
 
 
@@ -551,7 +554,8 @@ def split_parts(result: dict[str, Any], wall: float, own: dict[str, float]) -> d
         "learner_update": g("timers/learner_update_timer"),
         "asor_piece": g(cn + "asor_reward_connector"),
         "asor_batch": own.get("asor_batch", 0.0),
-        "asor_update": own.get("asor_update", 0.0),
+        "asor_rank": own.get("asor_rank", 0.0),
+        "asor_learn": own.get("asor_learn", 0.0),
         "gae": g(cn + "shared_values_gae") + g(cn + "general_advantage_estimation"),
         "learner_reduce": own.get("learner_reduce", 0.0),
         "weight_sync": g("timers/synch_weights"),
@@ -560,7 +564,7 @@ def split_parts(result: dict[str, Any], wall: float, own: dict[str, float]) -> d
     }
     pipeline = g(lc + "connector_pipeline_timer")
     p["driver_wait"] = p["sampling"] - p["runner_sample"]
-    p["asor_rest"] = p["asor_piece"] - p["asor_batch"] - p["asor_update"]
+    p["asor_rest"] = p["asor_piece"] - p["asor_batch"] - p["asor_rank"] - p["asor_learn"]
     p["connector_rest"] = pipeline - p["asor_piece"] - p["gae"]
     p["update"] = own.get("learner_update_call", 0.0) - pipeline - p["learner_reduce"]
     p["update_other"] = p["learner_update"] - own.get("learner_update_call", 0.0)
