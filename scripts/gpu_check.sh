@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # The GPU check (docs/cluster.md, "Running on GPUs"): on a machine with the project installed
 # (`make install`, or the offline kit: `source .gpu/install.sh`), run the `gpu`-marked tests and
-# the race scaling benchmark, then print one summary table. At most about 12 minutes: every step
-# runs under `timeout`. On a machine without CUDA the tests skip and the benchmark runs --quick
-# on the CPU. Steps that cannot run here (no pytest, Ray cannot start) print one line and the
-# rest goes on. Usage:  scripts/gpu_check.sh   or   make gpu-check
+# the race scaling benchmark, then print one summary table. About 8 minutes on an H200, at most
+# about 12: every step runs under `timeout`. On a machine without CUDA the tests skip and the
+# benchmark runs --quick on the CPU. Steps that cannot run here (no pytest, Ray cannot start)
+# print one line and the rest goes on. Usage:  scripts/gpu_check.sh   or   make gpu-check
 # Knobs: GPU_CHECK_OUT (default benchmarks/out/gpu_check), GPU_CHECK_TEST_S (240),
-# GPU_CHECK_BENCH_S (200; 420 without CUDA), GPU_CHECK_LEARNER_S (90; 120 without CUDA),
-# GPU_CHECK_OVERLAP_S (120; 300 without CUDA), GPU_CHECK_SPLIT_S (180; 420 without CUDA): a
+# GPU_CHECK_BENCH_S (160; 420 without CUDA), GPU_CHECK_LEARNER_S (60; 120 without CUDA),
+# GPU_CHECK_OVERLAP_S (100; 300 without CUDA), GPU_CHECK_SPLIT_S (120; 420 without CUDA): a
 # limit of 0 skips its step. GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without).
 set -u
 cd "$(dirname "$0")/.."
@@ -27,8 +27,8 @@ if ! "$py" -c "import torch" 2>/dev/null; then
 fi
 cuda=$("$py" -c "import torch; print(int(torch.cuda.is_available()))")
 if [ "$cuda" = 1 ]; then
-  device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=200; learner_s=90; overlap_s=120
-  split_s=180
+  device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=160; learner_s=60; overlap_s=100
+  split_s=120
 else  # a CPU machine checks the script itself: slower, so longer limits
   device=cpu; runners=${GPU_CHECK_RUNNERS:-1,2}; bench_s=420; learner_s=120; overlap_s=300
   split_s=420
