@@ -75,6 +75,31 @@ def test_targets_are_judged_on_cuda_only() -> None:
     assert {r[3] for r in rows} == {"not judged (CPU)"}
 
 
+def test_overlapped_end_to_end_is_judged_beside_the_synchronous_one() -> None:
+    sync = scaling_json("cuda", {("ppo", 1): 700.0, ("asor", 1): 800.0, ("ppo", 14): 5_000.0,
+                                 ("asor", 14): 4_900.0}, 15_000.0)  # fmt: skip
+    over = scaling_json("cuda", {("ppo_overlap", 14): 16_200.0, ("asor_overlap", 14): 14_000.0}, 0)
+    rows = {r[0]: r for r in summary.targets(sync, None, over)}
+    assert rows["PPO+ASOR overlapped end to end, 14 runners (env steps/s)"][1:] == [
+        "14,000", "≥ 15,000", "NOT met"]  # fmt: skip
+    assert rows["PPO overlapped end to end, 14 runners (env steps/s)"][3] == "met"
+    assert rows["PPO+ASOR ÷ PPO overlapped, 14 runners"][1:] == ["0.86", "≥ 0.9", "NOT met"]
+    assert rows["PPO+ASOR end to end, 14 runners (env steps/s)"][3] == "NOT met"  # unchanged
+    assert not any("overlapped" in r[0] for r in summary.targets(sync, None))
+
+
+def test_overlap_names_build_overlapped_ppo_with_or_without_asor() -> None:
+    from rllib_asor.algorithms.ppo.overlap import OverlappedPPO, overlap_enabled
+
+    args = scaling.settle(
+        scaling.build_parser().parse_args(["--quick", "--algos", "ppo_overlap,asor_overlap"])
+    )
+    plain, asor = (scaling.race_config(a, args, 1) for a in ("ppo_overlap", "asor_overlap"))
+    assert plain.algo_class is OverlappedPPO and overlap_enabled(plain) and overlap_enabled(asor)
+    assert "asor" not in (plain.learner_config_dict or {}) and "asor" in asor.learner_config_dict
+    assert scaling.race_config("ppo", args, 1).algo_class is not OverlappedPPO
+
+
 def test_test_counts_read_pytests_junit_report(tmp_path: Path) -> None:
     xml = tmp_path / "r.xml"
     assert summary.test_counts(xml).startswith("no report")
