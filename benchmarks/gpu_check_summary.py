@@ -3,7 +3,8 @@
     python -m benchmarks.gpu_check_summary benchmarks/out/gpu_check
 
 Reads OUT/gpu_tests.xml (pytest's junit report), OUT/e2e/scaling.json (sampling and end to
-end), OUT/overlap/scaling.json (end to end with overlapped sampling), OUT/learner/scaling.json (the Learner alone) and OUT/split/scaling.json (where an
+end), OUT/overlap/scaling.json (end to end with overlapped sampling), OUT/envs32/scaling.json
+(sampling with 32 envs per runner), OUT/learner/scaling.json (the Learner alone) and OUT/split/scaling.json (where an
 iteration's time goes, and the weight sync), all from `benchmarks.scaling` at minibatch
 2,048; a missing file is a row or a line that says so. The
 targets are those for a 16-core node with one GPU: at the most runners (14) PPO+ASOR
@@ -55,12 +56,13 @@ def targets(
     e2e: dict[str, Any] | None,
     learner: dict[str, Any] | None,
     overlap: dict[str, Any] | None = None,
+    envs32: dict[str, Any] | None = None,
 ) -> list[list[str]]:
     """Rows (check, measured, target, verdict) of the GPU node's targets (a 16-core
     node with one GPU, 14 runners); with `overlap`, the end-to-end targets again for
-    overlapped sampling."""
+    overlapped sampling; with `envs32`, the sampling targets again at 32 envs per runner."""
     counts = sorted({r["runners"] for r in (e2e or {}).get("rows", [])})
-    cuda = (e2e or learner or overlap or {}).get("settings", {}).get("device") == "cuda"
+    cuda = (e2e or learner or overlap or envs32 or {}).get("settings", {}).get("device") == "cuda"
     rows = []
     if counts:
         lo, hi = counts[0], counts[-1]
@@ -102,6 +104,11 @@ def targets(
              16_000.0],
             [f"PPO+ASOR ÷ PPO overlapped, {n} runners", fmt(rel, 2), "≥ 0.9", rel, 0.9],
         ]  # fmt: skip
+    for n in sorted({r["runners"] for r in (envs32 or {}).get("rows", [])}):
+        value, bar = rate(envs32, "ppo", n, "sample"), 3_000.0 if n == 1 else 30_000.0
+        if n in (1, 14):  # the targets' runner counts
+            rows.append([f"sampling only, 32 envs per runner, {n} runner(s) (env steps/s)",
+                         fmt(value), f"≥ {bar:,.0f}", value, bar])  # fmt: skip
     out = []
     for check, shown, target, value, bar in rows:
         if not cuda:
@@ -117,12 +124,17 @@ def targets(
 def main(argv: list[str] | None = None) -> int:
     out = Path((argv if argv is not None else sys.argv[1:])[0])
     e2e, learner = load(out / "e2e" / "scaling.json"), load(out / "learner" / "scaling.json")
-    overlap = load(out / "overlap" / "scaling.json")
+    overlap, envs32 = load(out / "overlap" / "scaling.json"), load(out / "envs32" / "scaling.json")
     lines = ["", "| check | measured | target | verdict |", "|---|---|---|---|"]
     lines.append(
         f"| gpu tests (`pytest -m gpu`) | {test_counts(out / 'gpu_tests.xml')} | all pass | |"
     )
-    parts = (("sampling and end to end", e2e), ("overlapped", overlap), ("Learner alone", learner))
+    parts = (
+        ("sampling and end to end", e2e),
+        ("overlapped", overlap),
+        ("sampling, 32 envs per runner", envs32),
+        ("Learner alone", learner),
+    )
     for name, res in parts:
         if res is None:
             lines.append(f"| scaling benchmark, {name} | no result (see its log) | | |")
@@ -149,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
             lines.append(
                 f"| note | {name}: stopped by its time limit; what it measured is above | | |"
             )
-    for check, shown, target, verdict in targets(e2e, learner, overlap):
+    for check, shown, target, verdict in targets(e2e, learner, overlap, envs32):
         lines.append(f"| {check} | {shown} | {target} | {verdict} |")
     split = load(out / "split" / "scaling.json")
     if split is None:

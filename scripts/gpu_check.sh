@@ -7,13 +7,13 @@
 # print one line and the rest goes on. Usage:  scripts/gpu_check.sh   or   make gpu-check
 # Knobs: GPU_CHECK_OUT (default benchmarks/out/gpu_check), GPU_CHECK_TEST_S (240),
 # GPU_CHECK_BENCH_S (160; 420 without CUDA), GPU_CHECK_LEARNER_S (60; 120 without CUDA),
-# GPU_CHECK_OVERLAP_S (100; 300 without CUDA), GPU_CHECK_SPLIT_S (120; 420 without CUDA): a
-# limit of 0 skips its step. GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without).
+# GPU_CHECK_OVERLAP_S (100; 300 without CUDA), GPU_CHECK_ENVS32_S (60; 200 without CUDA),
+# GPU_CHECK_SPLIT_S (120; 420 without CUDA): a limit of 0 skips its step. GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without).
 set -u
 cd "$(dirname "$0")/.."
 out=${GPU_CHECK_OUT:-benchmarks/out/gpu_check}
 mkdir -p "$out"
-rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/e2e "$out"/overlap "$out"/split
+rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/e2e "$out"/overlap "$out"/envs32 "$out"/split
 if [ -x .venv/bin/python ]; then py=${PYTHON:-.venv/bin/python}; else py=${PYTHON:-python3}; fi
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} RAY_memory_monitor_refresh_ms=0 \
   RAY_DISABLE_DOCKER_CPU_WARNING=1 RAY_USAGE_STATS_ENABLED=0 PYTHONUNBUFFERED=1
@@ -28,15 +28,15 @@ fi
 cuda=$("$py" -c "import torch; print(int(torch.cuda.is_available()))")
 if [ "$cuda" = 1 ]; then
   device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=160; learner_s=60; overlap_s=100
-  split_s=120
+  envs32_s=60; split_s=120
 else  # a CPU machine checks the script itself: slower, so longer limits
   device=cpu; runners=${GPU_CHECK_RUNNERS:-1,2}; bench_s=420; learner_s=120; overlap_s=300
-  split_s=420
+  envs32_s=200; split_s=420
   echo "gpu-check: torch sees no CUDA device: the gpu tests skip, the benchmark runs on the CPU"
 fi
 test_s=${GPU_CHECK_TEST_S:-240}; bench_s=${GPU_CHECK_BENCH_S:-$bench_s}
 learner_s=${GPU_CHECK_LEARNER_S:-$learner_s}; split_s=${GPU_CHECK_SPLIT_S:-$split_s}
-overlap_s=${GPU_CHECK_OVERLAP_S:-$overlap_s}
+overlap_s=${GPU_CHECK_OVERLAP_S:-$overlap_s}; envs32_s=${GPU_CHECK_ENVS32_S:-$envs32_s}
 skip() { [ "$1" = 0 ] && echo "gpu-check: skipped $2 (its limit is 0)"; }
 
 # 1. The gpu-marked tests: only the files that hold them (collecting the whole suite would
@@ -80,6 +80,16 @@ if ! skip "$overlap_s" "the overlapped end to end"; then
     --runners "$last" --algos ppo_overlap,asor_overlap --parts e2e --minibatch 2048 \
     --out "$out/overlap" > "$out/overlap.log" 2>&1
   echo "gpu-check: benchmark exit $? (log: $out/overlap.log)"
+fi
+
+# 3c. Sampling only with 32 envs per runner (the runner's per-call costs, race_net's forward
+#     above all, shared by 4× the envs; docs/speed.md), fewest and most runners.
+if ! skip "$envs32_s" "sampling with 32 envs per runner"; then
+  echo "gpu-check: benchmarks.scaling --envs-per-runner 32 --runners $runners, sampling only (at most $envs32_s s)"
+  timeout -k 10 "$envs32_s" "$py" -m benchmarks.scaling --quick --device "$device" \
+    --runners "$runners" --algos ppo --parts sample --envs-per-runner 32 \
+    --out "$out/envs32" > "$out/envs32.log" 2>&1
+  echo "gpu-check: benchmark exit $? (log: $out/envs32.log)"
 fi
 
 # 4. Where an iteration's time goes, PPO beside PPO+ASOR (built side by side, iterations

@@ -88,6 +88,16 @@ def test_overlapped_end_to_end_is_judged_beside_the_synchronous_one() -> None:
     assert not any("overlapped" in r[0] for r in summary.targets(sync, None))
 
 
+def test_sampling_at_32_envs_per_runner_is_judged_on_the_sampling_targets() -> None:
+    envs32 = scaling_json("cuda", {("ppo", 1): 0.0, ("ppo", 14): 0.0}, 0.0)
+    for row in envs32["rows"]:
+        row["sample"] = {1: 3_200.0, 14: 25_000.0}[row["runners"]]
+    rows = {r[0]: r for r in summary.targets(None, None, None, envs32)}
+    assert rows["sampling only, 32 envs per runner, 1 runner(s) (env steps/s)"][1:] == [
+        "3,200", "≥ 3,000", "met"]  # fmt: skip
+    assert rows["sampling only, 32 envs per runner, 14 runner(s) (env steps/s)"][3] == "NOT met"
+
+
 def test_overlap_names_build_overlapped_ppo_with_or_without_asor() -> None:
     from rllib_asor.algorithms.ppo.overlap import OverlappedPPO, overlap_enabled
 
