@@ -4,9 +4,9 @@
 
 Reads OUT/gpu_tests.xml (pytest's junit report), OUT/e2e/scaling.json (sampling and end to
 end), OUT/overlap/scaling.json (end to end with overlapped sampling), OUT/envs32/scaling.json
-(sampling with 32 envs per runner), OUT/learner/scaling.json (the Learner alone) and OUT/split/scaling.json (where an
-iteration's time goes, and the weight sync), all from `benchmarks.scaling` at minibatch
-2,048; a missing file is a row or a line that says so. The
+(sampling with 32 envs per runner), OUT/learner/scaling.json (the Learner alone) and
+OUT/split/scaling.json (where an iteration's time goes, and the weight sync), all from
+`benchmarks.scaling` at minibatch 2,048; a missing file is a row or a line that says so. The
 targets are those for a 16-core node with one GPU: at the most runners (14) PPO+ASOR
 end to end ≥ 15,000 env steps/s and PPO ≥ 16,000, PPO+ASOR ÷ PPO ≥ 0.9, 14 ÷ 1 runners ≥ 10×;
 sampling only ≥ 3,000 (one runner) and ≥ 30,000 (14); the GPU Learner alone ≥ 10,000. On a CPU
