@@ -20,6 +20,8 @@ from rllib_asor.settings_model import (
 
 GRAD_PENALTY_FORMS = ("zero_centred", "one_centred_mix")
 """`grad_penalty_form`'s values (`TransitionDiscriminator.gradient_penalty`)."""
+INPUT_NORM_ROWS = ("expert", "round")
+"""`input_norm_rows`' values (`GaifoTrainer.update`)."""
 
 
 class GaifoSettings(BlockSettings):
@@ -51,7 +53,11 @@ class GaifoSettings(BlockSettings):
     mixtures α·expert + (1 − α)·policy rows, α ~ N(0, 1) per element (the GARAT authors'
     `compute_grad_pen`, weight 10 there). Gradients w.r.t. the normalised input."""
     input_norm: bool = True
-    """Normalise the discriminator's inputs by the expert rows' mean and std (fixed)."""
+    """Normalise the discriminator's inputs by a mean and std (`input_norm_rows`)."""
+    input_norm_rows: one_of(INPUT_NORM_ROWS) = "expert"
+    """Whose mean and std: `expert`, the expert rows', fixed; `round`, at every discriminator
+    update the expert rows' and that update's policy rows' together (over all Learners), as
+    the GARAT authors normalise each round's target and grounded rows."""
     reward_form: one_of(("gail", "airl")) = "gail"
     """gail: −log(1 − D(s, s′)); airl: log D − log(1 − D) (the logit)."""
     reward_scale: NonNegative = 1.0

@@ -22,7 +22,7 @@ from rllib_asor.algorithms.gaifo.settings import GaifoSettings
 class GaifoTrainer:
     """D(s, s′) (or what `disc_input` names) with its optimizer and the expert transitions
     (module docstring); with `input_norm` the inputs are normalised by the expert rows' mean
-    and std."""
+    and std, or with `input_norm_rows: round` by those of each update's expert and policy rows."""
 
     def __init__(
         self, settings: GaifoSettings, demos: Demonstrations, device: Any = "cpu", rank: int = 0
@@ -57,6 +57,8 @@ class GaifoTrainer:
         """`disc_steps` steps on policy rows `features` against expert rows; the last
         step's statistics."""
         s = self.settings
+        if s.input_norm and s.input_norm_rows == "round":
+            self._fit_round_normalizer(features)
         stats: dict[str, torch.Tensor] = {}
         with torch.enable_grad():
             for _ in range(s.disc_steps):
@@ -73,6 +75,23 @@ class GaifoTrainer:
                 _average_gradients(self.disc)
                 self.optim.step()
         return stats
+
+    def _fit_round_normalizer(self, features: torch.Tensor) -> None:
+        """Mean and std of the expert rows and the policy rows `features` of every Learner (the
+        expert rows counted once: each Learner holds all of them), so every copy of D stays the
+        same."""
+        f = features.double()
+        local = torch.stack([f.sum(0), (f * f).sum(0)])
+        count = torch.tensor([float(f.shape[0])], dtype=torch.float64, device=f.device)
+        if dist.is_available() and dist.is_initialized() and dist.get_world_size() > 1:
+            dist.all_reduce(local)
+            dist.all_reduce(count)
+        e = self.expert.double()
+        n = count[0] + e.shape[0]
+        mean = (local[0] + e.sum(0)) / n
+        var = ((local[1] + (e * e).sum(0)) / n - mean * mean).clamp_min(0.0)
+        self.disc.mean.copy_(mean.float())
+        self.disc.std.copy_(var.sqrt().float().clamp_min(1e-4))
 
     def _pick(self, size: int, n: int) -> torch.Tensor:
         if size == 0:

@@ -93,6 +93,24 @@ def ground(
         return _ground(env, env_config, s, demonstrations, behaviour, state_dims)
 
 
+def gaifo_block(s: GaratSettings, demonstrations: str, state_dims: int) -> dict[str, Any]:
+    """The `gaifo:` settings of the grounding run: GARAT's discriminator settings in GAIfO's
+    names (the target rows are GAIfO's expert rows)."""
+    return {
+        "demonstrations": demonstrations,
+        "state_dims": state_dims,
+        "disc_input": GAIFO_INPUT[s.disc_input],
+        "disc_on_batch": s.disc_data == "rollouts",
+        "disc_hiddens": s.disc_hiddens,
+        "disc_lr": s.disc_lr,
+        "disc_steps": s.disc_steps,
+        "grad_penalty": s.grad_penalty,
+        "grad_penalty_form": s.grad_penalty_form,
+        "input_norm_rows": "expert" if s.disc_norm == "target" else "round",
+        "seed": s.seed,
+    }
+
+
 def _ground(
     env: str,
     env_config: dict[str, Any] | None,
@@ -127,18 +145,7 @@ def _ground(
             entropy_coeff=0.0,
         )
         .rl_module(model_config={"fcnet_hiddens": list(s.transformer_hiddens)})
-        .gaifo(
-            demonstrations=demonstrations,
-            state_dims=state_dims,
-            disc_input=GAIFO_INPUT[s.disc_input],
-            disc_on_batch=s.disc_data == "rollouts",
-            disc_hiddens=s.disc_hiddens,
-            disc_lr=s.disc_lr,
-            disc_steps=s.disc_steps,
-            grad_penalty=s.grad_penalty,
-            grad_penalty_form=s.grad_penalty_form,
-            seed=s.seed,
-        )
+        .gaifo(**gaifo_block(s, demonstrations, state_dims))
         .debugging(seed=s.seed)
         .reporting(metrics_num_episodes_for_smoothing=5)
     )

@@ -75,7 +75,11 @@ class GaratSettings(BlockSettings):
     (`reinforcedgat.py`: `concat_sas`); `s_a_delta` (s, a, s′ − s), the same information with
     the change of the state, which a small dynamics change moves by a larger share of its
     spread. `s_a_*` need `behaviour_policy` (the target rows' a is π₀(s)). Inputs are
-    normalised by the target rows' mean and std."""
+    normalised as `disc_norm` says."""
+    disc_norm: one_of(("target", "round")) = "target"
+    """Whose mean and std normalise D's inputs: `target`, the target rows', fixed; `round`, at
+    every discriminator update the target rows' and that update's grounded rows' together (the
+    authors' per-round normalisation)."""
     disc_data: one_of(("rollouts", "deterministic")) = "rollouts"
     """The grounded rows D trains on: `rollouts`, the transformer's PPO batch (Δ sampled);
     `deterministic`, before each grounding iteration `grounding_batch_size` fresh steps of the
