@@ -29,6 +29,10 @@ TEST_MINIBATCH = 64
 TEST_DATASET_ITERS = 2
 
 
+TEST_PRELEARNERS = {"concurrency": 1}
+"""`--test` with offline data: one OfflinePreLearner actor (RLlib starts 2; each imports RLlib)."""
+
+
 TEST_MAPLE = {
     "steps_per_iteration": 5,
     "rollout_batch_size": 256,
@@ -103,6 +107,7 @@ def apply_overrides(
         offline = cfg.get("input", "sampler") != "sampler"
         if offline:  # data from files: few dataset passes, the file's env runners (often 0)
             cfg["dataset_num_iters_per_learner"] = TEST_DATASET_ITERS
+            cfg["map_batches_kwargs"] = {**(cfg.get("map_batches_kwargs") or {}), **TEST_PRELEARNERS}
             tiny_test_data(exp)
         else:
             cfg["num_env_runners"] = TEST_ENV_RUNNERS

@@ -54,6 +54,23 @@ def test_test_mode_is_tiny_with_fractional_env_runners(write_yaml):
     assert experiment.required_cpus(cfg) <= 2
 
 
+def test_test_mode_on_offline_data_reads_it_with_one_prelearner(write_yaml, tmp_path):
+    """An offline `--test` run starts one OfflinePreLearner actor, not RLlib's 2, keeping the
+    file's other Ray Data settings, and its Ray is sized for it."""
+    data = tmp_path / "data"
+    data.mkdir()
+    path = write_yaml(
+        "x:\n  env: Pendulum-v1\n  run: CQL\n  config:\n"
+        f"    input: [{data}]\n    lr: null\n    map_batches_kwargs: {{num_cpus: 0.5}}\n"
+    )
+    [exp] = experiment.load_file(path)
+    experiment.apply_overrides(exp, test=True)
+    cfg = experiment.validate(exp)
+    assert cfg.map_batches_kwargs == {"num_cpus": 0.5, "concurrency": 1}
+    assert experiment.offline_data_cpus(cfg) == 1.5
+    assert cfg.dataset_num_iters_per_learner == 2
+
+
 def test_test_mode_puts_a_gpu_learner_on_the_cpu_when_torch_sees_no_cuda(write_yaml):
     """`ppo-asor-scale.yaml --test` on a laptop: the file's GPU Learner becomes a CPU Learner,
     with one warning naming the key (on a machine with CUDA the file's value stays)."""
