@@ -850,6 +850,9 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                         f"Tune {LABELS[algo]} {args.trials} trials: {rate:.0f} env steps/s",
                         flush=True,
                     )
+            import ray
+
+            ray.shutdown()  # the Ray it started: a later run in this process starts its own
     save(finished=True)
     return results
 

@@ -1,0 +1,36 @@
+"""`benchmarks.scaling`'s Ray parts run end to end on this machine (slow: about a minute each):
+they broke once unnoticed when ASOR's code they time moved, and `make gpu-check` found out on
+the GPU node. Covered in `make test` only by the argument and summary tests
+(test_scaling_args.py)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from benchmarks import scaling
+
+
+@pytest.mark.slow
+def test_the_split_times_asors_piece_inside_an_iteration(tmp_path: Path) -> None:
+    argv = ["--quick", "--runners", "1", "--sync-runners", "1", "--parts", "split",
+            "--iters", "1", "--out", str(tmp_path)]  # fmt: skip
+    assert scaling.main(argv) == 0
+    [split] = json.loads((tmp_path / "scaling.json").read_text())["split"]
+    assert split["iterations"]["asor"] and split["iterations"]["ppo"]
+    for it in split["iterations"]["asor"]:
+        assert it["asor_piece"] > 0 and it["asor_rank"] > 0 and it["asor_learn"] > 0
+        assert it["asor_batch"] + it["asor_rank"] + it["asor_learn"] <= it["asor_piece"] * 1.05
+    for it in split["iterations"]["ppo"]:
+        assert it["asor_piece"] == 0 and it["asor_learn"] == 0
+
+
+@pytest.mark.slow
+def test_overlapped_end_to_end_runs_with_asor(tmp_path: Path) -> None:
+    argv = ["--quick", "--runners", "1", "--algos", "asor_overlap", "--parts", "e2e",
+            "--iters", "1", "--out", str(tmp_path)]  # fmt: skip
+    assert scaling.main(argv) == 0
+    [row] = json.loads((tmp_path / "scaling.json").read_text())["rows"]
+    assert row["algo"] == "asor_overlap" and row["e2e"] > 0
