@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The GPU check (docs/cluster.md, "Running on GPUs"): on a machine with the project installed
 # (`make install`, or the offline kit: `source .gpu/install.sh`), run the `gpu`-marked tests and
-# the race scaling benchmark, then print one summary table. About 8 minutes on an H200, at most
-# about 12: every step runs under `timeout`. On a machine without CUDA the tests skip and the
+# the race scaling benchmark, then print one summary table. About 9 minutes on an H200, at most
+# about 13: every step runs under `timeout`. On a machine without CUDA the tests skip and the
 # benchmark runs --quick on the CPU. Steps that cannot run here (no pytest, Ray cannot start)
 # print one line and the rest goes on. Usage:  scripts/gpu_check.sh   or   make gpu-check
 # Knobs: GPU_CHECK_OUT (default benchmarks/out/gpu_check), GPU_CHECK_TEST_S (240),
