@@ -13,12 +13,17 @@ import pytest
 from benchmarks import scaling
 
 
+def _scaling(out: Path, *argv: str) -> dict:
+    """`benchmarks.scaling --quick --runners 1 --iters 1 ARGV` into `out`: its scaling.json."""
+    assert (
+        scaling.main(["--quick", "--runners", "1", "--iters", "1", *argv, "--out", str(out)]) == 0
+    )
+    return json.loads((out / "scaling.json").read_text())
+
+
 @pytest.mark.slow
 def test_the_split_times_asors_piece_inside_an_iteration(tmp_path: Path) -> None:
-    argv = ["--quick", "--runners", "1", "--sync-runners", "1", "--parts", "split",
-            "--iters", "1", "--out", str(tmp_path)]  # fmt: skip
-    assert scaling.main(argv) == 0
-    [split] = json.loads((tmp_path / "scaling.json").read_text())["split"]
+    [split] = _scaling(tmp_path, "--sync-runners", "1", "--parts", "split")["split"]
     assert split["iterations"]["asor"] and split["iterations"]["ppo"]
     for it in split["iterations"]["asor"]:
         assert it["asor_piece"] > 0 and it["asor_rank"] > 0 and it["asor_learn"] > 0
@@ -29,8 +34,5 @@ def test_the_split_times_asors_piece_inside_an_iteration(tmp_path: Path) -> None
 
 @pytest.mark.slow
 def test_overlapped_end_to_end_runs_with_asor(tmp_path: Path) -> None:
-    argv = ["--quick", "--runners", "1", "--algos", "asor_overlap", "--parts", "e2e",
-            "--iters", "1", "--out", str(tmp_path)]  # fmt: skip
-    assert scaling.main(argv) == 0
-    [row] = json.loads((tmp_path / "scaling.json").read_text())["rows"]
+    [row] = _scaling(tmp_path, "--algos", "asor_overlap", "--parts", "e2e")["rows"]
     assert row["algo"] == "asor_overlap" and row["e2e"] > 0
