@@ -40,11 +40,11 @@ def start_local_ray(num_cpus: int = 2) -> None:
 
 
 def write_json(path: Path, data: Any) -> None:
-    """Write `data` as JSON to `path` atomically (a temp file renamed into place), so an
-    interrupted benchmark never leaves a half-written run file that a rerun would skip."""
+    """Write `data` as compact JSON to `path` atomically (a temp file renamed into place), so
+    an interrupted benchmark never leaves a half-written run file that a rerun would skip."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data))
+    tmp.write_text(json.dumps(data, separators=(",", ":")))
     os.replace(tmp, path)
 
 
