@@ -8,7 +8,8 @@
 # Knobs: GPU_CHECK_OUT (default benchmarks/out/gpu_check), GPU_CHECK_TEST_S (240),
 # GPU_CHECK_BENCH_S (160; 420 without CUDA), GPU_CHECK_LEARNER_S (60; 120 without CUDA),
 # GPU_CHECK_OVERLAP_S (100; 300 without CUDA), GPU_CHECK_ENVS32_S (60; 200 without CUDA),
-# GPU_CHECK_SPLIT_S (120; 420 without CUDA): a limit of 0 skips its step. GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without).
+# GPU_CHECK_SPLIT_S (120; 420 without CUDA): a limit of 0 skips its step.
+# GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without).
 set -u
 cd "$(dirname "$0")/.."
 out=${GPU_CHECK_OUT:-benchmarks/out/gpu_check}
@@ -38,6 +39,16 @@ test_s=${GPU_CHECK_TEST_S:-240}; bench_s=${GPU_CHECK_BENCH_S:-$bench_s}
 learner_s=${GPU_CHECK_LEARNER_S:-$learner_s}; split_s=${GPU_CHECK_SPLIT_S:-$split_s}
 overlap_s=${GPU_CHECK_OVERLAP_S:-$overlap_s}; envs32_s=${GPU_CHECK_ENVS32_S:-$envs32_s}
 skip() { [ "$1" = 0 ] && echo "gpu-check: skipped $2 (its limit is 0)"; }
+# bench NAME LIMIT WHAT ARGS...: `benchmarks.scaling --quick ARGS` under LIMIT seconds into
+# $out/NAME (its scaling.json) and $out/NAME.log; a LIMIT of 0 skips it.
+bench() {
+  local name=$1 limit=$2 what=$3; shift 3
+  skip "$limit" "$what" && return
+  echo "gpu-check: $what: benchmarks.scaling --device $device $* (at most $limit s)"
+  timeout -k 10 "$limit" "$py" -m benchmarks.scaling --quick --device "$device" "$@" \
+    --out "$out/$name" > "$out/$name.log" 2>&1
+  echo "gpu-check: benchmark exit $? (log: $out/$name.log)"
+}
 
 # 1. The gpu-marked tests: only the files that hold them (collecting the whole suite would
 #    import modules whose extras, e.g. highway-env, an offline kit does not carry).
@@ -57,50 +68,27 @@ fi
 # 2. The Learner alone on the most runners' batches at the scale example's minibatch (2,048;
 #    at 256 a GPU Learner is the wall: its cost per minibatch hardly depends on the rows).
 last=${runners##*,}
-if ! skip "$learner_s" "the Learner alone"; then
-  echo "gpu-check: Learner alone, minibatch 2048, $last runners' batches (at most $learner_s s)"
-  timeout -k 10 "$learner_s" "$py" -m benchmarks.scaling --quick --device "$device" \
-    --runners "$last" --parts learner --minibatch 2048 --out "$out/learner" > "$out/learner.log" 2>&1
-  echo "gpu-check: benchmark exit $? (log: $out/learner.log)"
-fi
+bench learner "$learner_s" "Learner alone, $last runners' batches" \
+  --runners "$last" --parts learner --minibatch 2048
 
 # 3. Sampling and end to end, PPO and PPO+ASOR, fewest and most runners, minibatch 2,048.
-if ! skip "$bench_s" "sampling and end to end"; then
-  echo "gpu-check: benchmarks.scaling --device $device --runners $runners, sampling and end to end (at most $bench_s s)"
-  timeout -k 10 "$bench_s" "$py" -m benchmarks.scaling --quick --device "$device" \
-    --runners "$runners" --parts sample,e2e --minibatch 2048 --out "$out/e2e" > "$out/e2e.log" 2>&1
-  echo "gpu-check: benchmark exit $? (log: $out/e2e.log)"
-fi
+bench e2e "$bench_s" "sampling and end to end" --runners "$runners" --parts sample,e2e \
+  --minibatch 2048
 
 # 3b. End to end with overlapped sampling (the runners sample batch k+1 while the Learner
 #     trains on batch k; rllib_asor/algorithms/ppo/overlap.py) at the most runners.
-if ! skip "$overlap_s" "the overlapped end to end"; then
-  echo "gpu-check: benchmarks.scaling --algos ppo_overlap,asor_overlap --runners $last, end to end (at most $overlap_s s)"
-  timeout -k 10 "$overlap_s" "$py" -m benchmarks.scaling --quick --device "$device" \
-    --runners "$last" --algos ppo_overlap,asor_overlap --parts e2e --minibatch 2048 \
-    --out "$out/overlap" > "$out/overlap.log" 2>&1
-  echo "gpu-check: benchmark exit $? (log: $out/overlap.log)"
-fi
+bench overlap "$overlap_s" "the overlapped end to end" --runners "$last" \
+  --algos ppo_overlap,asor_overlap --parts e2e --minibatch 2048
 
 # 3c. Sampling only with 32 envs per runner (the runner's per-call costs, race_net's forward
 #     above all, shared by 4× the envs; docs/speed.md), fewest and most runners.
-if ! skip "$envs32_s" "sampling with 32 envs per runner"; then
-  echo "gpu-check: benchmarks.scaling --envs-per-runner 32 --runners $runners, sampling only (at most $envs32_s s)"
-  timeout -k 10 "$envs32_s" "$py" -m benchmarks.scaling --quick --device "$device" \
-    --runners "$runners" --algos ppo --parts sample --envs-per-runner 32 \
-    --out "$out/envs32" > "$out/envs32.log" 2>&1
-  echo "gpu-check: benchmark exit $? (log: $out/envs32.log)"
-fi
+bench envs32 "$envs32_s" "sampling with 32 envs per runner" --runners "$runners" --algos ppo \
+  --parts sample --envs-per-runner 32
 
 # 4. Where an iteration's time goes, PPO beside PPO+ASOR (built side by side, iterations
 #    interleaved) at the most runners, and the weight sync to that many runners alone.
-if ! skip "$split_s" "the split"; then
-  echo "gpu-check: benchmarks.scaling --parts split,sync --runners $last (at most $split_s s)"
-  timeout -k 10 "$split_s" "$py" -m benchmarks.scaling --quick --device "$device" \
-    --runners "$last" --sync-runners "$last" --parts split,sync --minibatch 2048 \
-    --out "$out/split" > "$out/split.log" 2>&1
-  echo "gpu-check: benchmark exit $? (log: $out/split.log)"
-fi
+bench split "$split_s" "the split" --runners "$last" --sync-runners "$last" --parts split,sync \
+  --minibatch 2048
 
 # 5. One table.
 "$py" -m benchmarks.gpu_check_summary "$out"
