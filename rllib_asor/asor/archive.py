@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Hashable
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -67,19 +68,28 @@ class StateArchive(nn.Module):
     def end_call(self, gamma: float) -> None:
         """Archive the episodes that terminated in this call and the open ones that received no
         chunk since the last `end_call` (the env truncated them); call once per batch, after
-        all `add_chunk`s."""
+        all `add_chunk`s. All closing episodes go through one return-to-go pass and one sort
+        per bucket (a batch of a short-episode env closes hundreds)."""
         closing = [
-            k for k, ep in self._open.items() if ep.terminated or ep.seen_in_call < self._calls
+            self._open.pop(k)
+            for k in [
+                k for k, ep in self._open.items() if ep.terminated or ep.seen_in_call < self._calls
+            ]
         ]
-        episodes = []
-        for key in closing:
-            ep = self._open.pop(key)
-            feats, rewards = torch.cat(ep.features), torch.cat(ep.rewards)
-            if len(rewards):
-                rtg = discounted_return_to_go(rewards, gamma)
-                episodes.append((feats, rtg, float(rewards.sum()), ep.dynamics_id))
-        self.insert_many(episodes)
+        closing = [ep for ep in closing if any(len(r) for r in ep.rewards)]
         self._calls += 1
+        if not closing:
+            return
+        lengths = [sum(len(r) for r in ep.rewards) for ep in closing]
+        rewards = torch.cat([r for ep in closing for r in ep.rewards])
+        returns = np.add.reduceat(rewards.double().numpy(), np.cumsum([0, *lengths[:-1]]))
+        self._insert(
+            torch.cat([f for ep in closing for f in ep.features]),
+            discounted_return_to_go(rewards, gamma, lengths),
+            lengths,
+            returns.tolist(),
+            [ep.dynamics_id for ep in closing],
+        )
 
     def insert(
         self,
@@ -91,35 +101,48 @@ class StateArchive(nn.Module):
         """Insert one whole episode; keep the bucket's `capacity` best states."""
         self.insert_many([(features, return_to_go, episode_return, dynamics_id)])
 
-    @torch.no_grad()
-    def insert_many(
-        self, episodes: list[tuple[torch.Tensor, torch.Tensor, float, int]]
-    ) -> None:
+    def insert_many(self, episodes: list[tuple[torch.Tensor, torch.Tensor, float, int]]) -> None:
         """Insert whole episodes (features, return-to-go, episode return, dynamics id), stamped
         in list order; each bucket keeps its `capacity` best states: highest episode return
         first, among equal returns the newest first (what inserting them one by one keeps)."""
-        by_bucket: dict[int, list[tuple[torch.Tensor, torch.Tensor, float, float]]] = {}
-        for features, return_to_go, episode_return, dynamics_id in episodes:
-            self.episodes_added += 1
-            by_bucket.setdefault(int(dynamics_id) % self.buckets, []).append(
-                (features, return_to_go, float(episode_return), float(self.episodes_added))
+        if episodes:
+            self._insert(
+                torch.cat([f for f, *_ in episodes]),
+                torch.cat([g for _, g, *_ in episodes]),
+                [len(f) for f, *_ in episodes],
+                [float(r) for *_, r, _ in episodes],
+                [int(d) for *_, d in episodes],
             )
-        for b, new in by_bucket.items():
+
+    @torch.no_grad()
+    def _insert(
+        self,
+        features: torch.Tensor,
+        return_to_go: torch.Tensor,
+        lengths: list[int],
+        returns: list[float],
+        dynamics_ids: list[int],
+    ) -> None:
+        """`insert_many` on the episodes' rows back to back (`lengths` rows each)."""
+        dev = features.device  # the rows' bookkeeping beside the rows
+        counts = torch.tensor(lengths, device=dev)
+        first = float(self.episodes_added) + 1.0
+        self.episodes_added += len(lengths)
+        bucket = torch.tensor(dynamics_ids, device=dev) % self.buckets
+        rets = torch.tensor(returns, dtype=self.returns.dtype, device=dev)
+        stamps = first + torch.arange(len(lengths), dtype=self.stamp.dtype, device=dev)
+        bucket, rets, stamps = (x.repeat_interleave(counts) for x in (bucket, rets, stamps))
+        for b in bucket.unique().tolist():
+            rows = bucket == b
             n = int(self.size[b])
-            feats = torch.cat([self.features[b, :n], *(f.to(self.features) for f, *_ in new)])
-            rtg = torch.cat([self.return_to_go[b, :n], *(g.to(self.return_to_go) for _, g, *_ in new)])
-            rets = torch.cat(
-                [self.returns[b, :n]]
-                + [torch.full((len(f),), r, device=self.returns.device) for f, _, r, _ in new]
-            )
-            stamp = torch.cat(
-                [self.stamp[b, :n]]
-                + [torch.full((len(f),), t, device=self.stamp.device) for f, _, _, t in new]
-            )
+            feats = torch.cat([self.features[b, :n], features[rows].to(self.features)])
+            rtg = torch.cat([self.return_to_go[b, :n], return_to_go[rows].to(self.return_to_go)])
+            ret = torch.cat([self.returns[b, :n], rets[rows].to(self.returns)])
+            stamp = torch.cat([self.stamp[b, :n], stamps[rows].to(self.stamp)])
             order = torch.argsort(stamp, descending=True, stable=True)
-            order = order[torch.argsort(rets[order], descending=True, stable=True)][: self.capacity]
+            order = order[torch.argsort(ret[order], descending=True, stable=True)][: self.capacity]
             k = len(order)
-            self.features[b, :k], self.returns[b, :k] = feats[order], rets[order]
+            self.features[b, :k], self.returns[b, :k] = feats[order], ret[order]
             self.return_to_go[b, :k], self.stamp[b, :k] = rtg[order], stamp[order]
             self.returns[b, k:] = -torch.inf
             self.size[b] = k
@@ -160,14 +183,23 @@ class StateArchive(nn.Module):
         return [int(s) for s in self.size]
 
 
-def discounted_return_to_go(rewards: torch.Tensor, gamma: float) -> torch.Tensor:
-    """G_t = Σ_k γ^k r_{t+k} within one episode (float32, shape like `rewards`).
+def discounted_return_to_go(
+    rewards: torch.Tensor, gamma: float, lengths: list[int] | None = None
+) -> torch.Tensor:
+    """G_t = Σ_k γ^k r_{t+k} within one episode (float32, shape like `rewards`); with
+    `lengths`, within each of several episodes stored back to back.
 
     The recurrence G_t = r_t + γ·G_{t+1} as a linear filter over the reversed rewards, in
-    float64 (scipy's `lfilter`).
+    float64 (scipy's `lfilter`), once over all the episodes; each episode then drops what the
+    filter carried in from the episodes after it: γ^(e−t)·H_e, e its end and H the filter's
+    output.
     """
     from scipy.signal import lfilter
 
-    r = rewards.detach().cpu().double().numpy()[::-1]
-    g = lfilter([1.0], [1.0, -float(gamma)], r)[::-1].copy()
+    r = rewards.detach().cpu().double().numpy()
+    g = lfilter([1.0], [1.0, -float(gamma)], r[::-1])[::-1].copy()
+    if lengths is not None and len(lengths) > 1:
+        ends = np.repeat(np.cumsum(lengths), lengths)
+        t = np.flatnonzero(ends < len(r))
+        g[t] -= float(gamma) ** (ends[t] - t) * g[ends[t]]
     return torch.from_numpy(g).float()

@@ -171,6 +171,31 @@ def test_discounted_return_to_go():
     assert got.dtype == torch.float32 and torch.equal(got, expected)
 
 
+def test_return_to_go_of_episodes_back_to_back_restarts_at_each_episode():
+    assert discounted_return_to_go(torch.tensor([1.0, 2.0, 4.0]), 0.5, [2, 1]).tolist() == [
+        2.0, 2.0, 4.0,  # [1 + 0.5·2, 2] then [4]: nothing carried over from the next episode
+    ]  # fmt: skip
+    rewards = torch.randn(500, generator=torch.Generator().manual_seed(1))
+    lengths = [1, 200, 99, 1, 199]
+    one_by_one = torch.cat([discounted_return_to_go(r, 0.99) for r in rewards.split(lengths)])
+    torch.testing.assert_close(discounted_return_to_go(rewards, 0.99, lengths), one_by_one)
+
+
+def test_closing_many_episodes_in_one_call_keeps_what_one_by_one_inserts_keep():
+    g = torch.Generator().manual_seed(0)
+    together, one_by_one = StateArchive(2, capacity=30, buckets=3), StateArchive(2, capacity=30, buckets=3)
+    for call in range(6):
+        for i in range(7):
+            n = 1 + (3 * i + call) % 9
+            feats, rewards = torch.randn(n, 2, generator=g), torch.randn(n, generator=g).round()
+            together.add_chunk((call, i), feats, rewards, i - 2, terminated=True, gamma=0.9)
+            rtg = discounted_return_to_go(rewards, 0.9)
+            one_by_one.insert(feats, rtg, float(rewards.sum()), i - 2)
+        together.end_call(0.9)
+    for name in ("features", "returns", "return_to_go", "stamp", "size", "episodes_added"):
+        torch.testing.assert_close(getattr(together, name), getattr(one_by_one, name), msg=name)
+
+
 # ------------------------------------------------------------------ the whole update
 def _episodes_batch(reward_scale_factor: float, n_eps: int = 8, length: int = 10, seed: int = 0):
     """n_eps complete episodes; the goal pays at the end, better episodes come from one side."""
