@@ -108,6 +108,7 @@ class BlockSettings(Settings):
         return cls(**d)
 
 
+IntAtLeast0 = Annotated[int, Field(ge=0), Allowed("an int ≥ 0")]
 IntAtLeast1 = Annotated[int, Field(ge=1), Allowed("an int ≥ 1")]
 NonNegative = Annotated[float, Field(ge=0), Allowed("a number ≥ 0")]
 Positive = Annotated[float, Field(gt=0), Allowed("a number > 0")]

@@ -15,13 +15,13 @@ from rllib_asor.algorithms.escp.rmdm import KERNELS
 from rllib_asor.settings_model import (
     Allowed,
     BlockSettings,
+    IntAtLeast0,
     IntAtLeast1,
     NonNegative,
     Positive,
     one_of,
 )
 
-IntAtLeast0 = Annotated[int, Field(ge=0), Allowed("an int ≥ 0")]
 TaskCount = Annotated[int, Field(ge=2), Allowed("an int ≥ 2")]
 Share = Annotated[float, Field(ge=0, le=1), Allowed("a number ≥ 0 and ≤ 1")]
 Widths = Annotated[

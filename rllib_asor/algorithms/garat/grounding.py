@@ -141,8 +141,9 @@ def _ground(
             gamma=0.99,
             train_batch_size=batch,
             minibatch_size=min(256, batch),
-            num_epochs=5,
-            entropy_coeff=0.0,
+            num_epochs=s.transformer_epochs,
+            clip_param=s.transformer_clip_param,
+            entropy_coeff=s.transformer_entropy_coeff,
         )
         .rl_module(model_config={"fcnet_hiddens": list(s.transformer_hiddens)})
         .gaifo(**gaifo_block(s, demonstrations, state_dims))
@@ -156,8 +157,10 @@ def _ground(
         for i in range(s.grounding_iterations):
             if grounding is not None:
                 obs, nxt = deterministic_rows(grounding, saved_transformer(algo), batch, s.seed, i)
-                stats = train_discriminator(algo, obs, nxt)
-            result = algo.train()
+                warm = i < s.disc_warmup_iterations
+                stats = train_discriminator(algo, obs, nxt, 5 if warm else 1)
+            for _ in range(s.generator_iterations):
+                result = algo.train()
             if grounding is None:
                 stats = {
                     f"grounding_{k}": float(v)
@@ -205,9 +208,11 @@ def deterministic_rows(
     return np.asarray(obs_rows, np.float32), np.asarray(next_rows, np.float32)
 
 
-def train_discriminator(algo: Any, obs: np.ndarray, next_obs: np.ndarray) -> dict[str, float]:
-    """`disc_steps` steps of the Learner's discriminator on the grounded rows (o, o′) against
-    the target's; its statistics as `grounding_*`."""
+def train_discriminator(
+    algo: Any, obs: np.ndarray, next_obs: np.ndarray, rounds: int = 1
+) -> dict[str, float]:
+    """`rounds` × `disc_steps` steps of the Learner's discriminator on the grounded rows (o, o′)
+    against the target's; the last round's statistics as `grounding_*`."""
 
     def update(learner: Any) -> dict[str, float]:
         import torch
@@ -215,6 +220,9 @@ def train_discriminator(algo: Any, obs: np.ndarray, next_obs: np.ndarray) -> dic
         trainer = learner.gaifo
         o = torch.as_tensor(obs, device=trainer.device)
         o2 = torch.as_tensor(next_obs, device=trainer.device)
-        return {f"grounding_{k}": float(v) for k, v in trainer.update(trainer.features(o, o2)).items()}
+        features = trainer.features(o, o2)
+        for _ in range(rounds):
+            stats = trainer.update(features)
+        return {f"grounding_{k}": float(v) for k, v in stats.items()}
 
     return [r.get() for r in algo.learner_group.foreach_learner(update)][0]

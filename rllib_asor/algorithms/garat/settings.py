@@ -10,12 +10,13 @@ from __future__ import annotations
 
 from typing import Annotated, Any, ClassVar
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from rllib_asor.algorithms.gaifo.settings import GRAD_PENALTY_FORMS
 from rllib_asor.settings_model import (
     Allowed,
     BlockSettings,
+    IntAtLeast0,
     IntAtLeast1,
     NonNegative,
     Positive,
@@ -55,6 +56,17 @@ class GaratSettings(BlockSettings):
     """Hidden layers of the transformer's policy and value networks."""
     transformer_lr: Positive = 3e-4
     """Adam lr of the transformer's PPO (`--atp_lr`)."""
+    transformer_epochs: IntAtLeast1 = 5
+    """PPO epochs over each transformer batch (`--noptepochs`; 1 in `train_garat.sh`)."""
+    transformer_clip_param: Positive = 0.3
+    """PPO's clip range for the transformer (RLlib's default; `--clip_range 0.1` in
+    `train_garat.sh`)."""
+    transformer_entropy_coeff: NonNegative = 0.0
+    """PPO's entropy bonus for the transformer (`--ent_coeff 0.01` in `train_garat.sh`)."""
+    generator_iterations: IntAtLeast1 = 1
+    """With `disc_data: deterministic`: the transformer's PPO iterations per discriminator
+    update, D fixed in between (the authors train it for `--generator_epochs` × `--gsim_trans`
+    = 250,000 steps per D update: `trainer.py`, `train_action_transformer_policy`)."""
     action_tf_ratio: Positive = 2.0
     """|Δ| ≤ ratio · half the action range (`ACTION_TF_RATIO`)."""
     alpha: NonNegative = 1.0
@@ -69,6 +81,9 @@ class GaratSettings(BlockSettings):
     """Adam lr of the discriminator (`--disc_lr`)."""
     disc_steps: IntAtLeast1 = 5
     """Discriminator gradient steps per grounding iteration."""
+    disc_warmup_iterations: IntAtLeast0 = 0
+    """The first grounding iterations in which D takes 5 × `disc_steps` steps (the authors'
+    warm-up: `trainer.py`, 5 × `--noptepochs` epochs while the GAN iteration is ≤ 10)."""
     disc_input: one_of(("s_next", "s_a_next", "s_a_delta")) = "s_next"
     """What the discriminator reads of a transition: `s_next` (s, s′); `s_a_next` (s, a, s′),
     a the behaviour policy's action (before the transformer), the authors' input
@@ -93,3 +108,13 @@ class GaratSettings(BlockSettings):
     E(‖∇ logit‖ − 1)² at mixtures α·target + (1 − α)·grounded rows, α ~ N(0, 1) per element."""
     seed: int = 0
     """Seed of the grounding run (its env, behaviour actions and networks)."""
+
+    @model_validator(mode="after")
+    def _generator_iterations_need_a_fixed_d(self) -> GaratSettings:
+        if self.generator_iterations > 1 and self.disc_data != "deterministic":
+            raise ValueError(
+                f"garat.generator_iterations={self.generator_iterations!r} is not allowed with "
+                f"garat.disc_data={self.disc_data!r} (D trains on every PPO batch there); "
+                "expected 1, or disc_data: deterministic"
+            )
+        return self

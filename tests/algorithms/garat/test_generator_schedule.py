@@ -1,0 +1,58 @@
+"""GARAT's schedule of the two players: the discriminator's warm-up, the transformer's PPO
+iterations per discriminator update (D fixed in between) and its PPO settings, on a real
+grounding run on Pendulum; and their validation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rllib_asor.algorithms.common.demonstrations import Demonstrations, save_demonstrations
+from rllib_asor.algorithms.gaifo.trainer import GaifoTrainer
+from rllib_asor.algorithms.garat import grounding
+from rllib_asor.algorithms.garat.settings import GaratSettings
+
+
+def test_several_generator_iterations_need_a_fixed_discriminator():
+    with pytest.raises(ValueError, match=r"garat.generator_iterations=2 is not allowed with "
+                       r"garat.disc_data='rollouts'.*expected 1, or disc_data: deterministic"):  # fmt: skip
+        GaratSettings(generator_iterations=2)
+    assert GaratSettings(generator_iterations=2, disc_data="deterministic").generator_iterations == 2
+    with pytest.raises(ValueError, match=r"garat.disc_warmup_iterations=-1 is not allowed; "
+                       "expected an int ≥ 0"):  # fmt: skip
+        GaratSettings(disc_warmup_iterations=-1)
+    defaults = GaratSettings()  # what every run before these settings did
+    assert (defaults.generator_iterations, defaults.disc_warmup_iterations) == (1, 0)
+    assert (defaults.transformer_epochs, defaults.transformer_clip_param) == (5, 0.3)
+    assert defaults.transformer_entropy_coeff == 0.0
+
+
+def test_warm_up_and_generator_iterations_schedule_the_two_players(tmp_path, monkeypatch):
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(40, 3)).astype(np.float32)
+    path = tmp_path / "target.npz"
+    save_demonstrations(path, Demonstrations.of(obs[:-1], obs[1:], [0] * 39, [False] * 39))
+    d_steps, algos = [], []
+    real_update, real_saved = GaifoTrainer.update, grounding.saved_transformer
+
+    def counting_update(self, features):
+        d_steps.append(len(d_steps))
+        return real_update(self, features)
+
+    def keep_algo(algo):
+        algos.append(algo)
+        return real_saved(algo)
+
+    monkeypatch.setattr(GaifoTrainer, "update", counting_update)
+    monkeypatch.setattr(grounding, "saved_transformer", keep_algo)
+    settings = GaratSettings(
+        grounding_iterations=3, grounding_batch_size=32, disc_steps=1, disc_data="deterministic",
+        disc_warmup_iterations=1, generator_iterations=2, transformer_epochs=1,
+        transformer_clip_param=0.1, transformer_entropy_coeff=0.01,
+    )  # fmt: skip
+    grounding.ground("Pendulum-v1", {}, settings, str(path))
+    algo = algos[-1]
+    assert algo.iteration == 3 * 2  # two PPO iterations per discriminator update
+    assert len(d_steps) == 5 + 1 + 1  # 5 updates in the warm-up iteration, then 1 each
+    assert (algo.config.num_epochs, algo.config.clip_param) == (1, 0.1)
+    assert algo.config.entropy_coeff == 0.01
