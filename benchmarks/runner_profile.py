@@ -22,7 +22,9 @@ variants built once and sampled in interleaved rounds (a fair ratio on a shared 
 - `envs16`, `envs32`: 16 or 32 envs per runner (`num_envs_per_env_runner`);
 - `async`: 8 envs in gymnasium's async vector env (`gym_env_vectorize_mode="async"`: one
   subprocess per env; the steps run in parallel, RLlib's loop still waits for all of them);
-- `async16`: the same with 16 envs.
+- `async16`: the same with 16 envs;
+- `eager`: the base runner acting with race_net's eager forward (`trace_inference: false`;
+  the base runner acts through its TorchScript trace).
 
     python -m benchmarks.runner_profile --what split,rate --steps 2048 --rounds 3
 """
@@ -47,7 +49,9 @@ VARIANTS = {
     "envs32": {"num_envs_per_env_runner": 32},
     "async": {"gym_env_vectorize_mode": "async"},
     "async16": {"gym_env_vectorize_mode": "async", "num_envs_per_env_runner": 16},
+    "eager": {"model_config": {"trace_inference": False}},
 }
+"""Each variant's `env_runners(...)` settings; `model_config` updates race_net's settings."""
 WHATS = ("split", "profile", "rate")
 
 
@@ -59,7 +63,12 @@ def build_runner(variant: str = "base", algo: str = "asor") -> Any:
 
     args = scaling.settle(scaling.build_parser().parse_args(["--runners", "1"]))
     config = scaling.race_config(algo, args, 0)
-    config = config.env_runners(**VARIANTS[variant])
+    settings = dict(VARIANTS[variant])
+    if "model_config" in settings:
+        config = config.rl_module(
+            model_config={**config.model_config, **settings.pop("model_config")}
+        )
+    config = config.env_runners(**settings)
     return SingleAgentEnvRunner(config=config)
 
 

@@ -60,15 +60,24 @@ def test_without_remote_runners_it_samples_in_the_driver(ray_session):
 
 def test_samples_the_next_batch_during_the_update_learns_and_restores(ray_session, tmp_path):
     """The runners sample batch k+1 while the Learner trains on batch k (one sample call in
-    flight at every update), the policy learns CartPole, and a checkpoint restores."""
+    flight at every update), the lag correction reports its lag, the policy learns CartPole,
+    and a checkpoint restores."""
     config = _cartpole().training(train_batch_size=1000, minibatch_size=250, num_epochs=6, lr=1e-3)
     algo = overlap_sampling(config).build_algo()
     try:
         assert isinstance(algo, OverlappedPPO)
         seen = _spy_in_flight(algo)
-        returns = [algo.train()["env_runners"]["episode_return_mean"] for _ in range(10)]
+        results = [algo.train() for _ in range(10)]
         assert seen == [1] * 10
+        returns = [r["env_runners"]["episode_return_mean"] for r in results]
         assert np.nanmax(returns[-3:]) > 3 * returns[0]  # random policy ≈ 20
+        # The lag correction (on by default) reports the lag it corrects: none in the first
+        # batch (sampled by the weights it trains), one update of lag in every later one.
+        lag = [r["learners"]["default_policy"] for r in results]
+        assert lag[0]["lag/logp_gap"] == pytest.approx(0.0, abs=1e-5)
+        assert lag[0]["lag/weight_mean"] == pytest.approx(1.0, abs=1e-5)
+        assert all(r["lag/logp_gap"] > 1e-4 for r in lag[1:])
+        assert all(0 < r["lag/weight_mean"] <= 1.0 for r in lag[1:])
         path = algo.save(str(tmp_path / "ckpt")).checkpoint.path
     finally:
         algo.stop()

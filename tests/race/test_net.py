@@ -1,5 +1,7 @@
 """RaceNetModule on the race's real spaces: shapes, valid actions, gradients, settings."""
 
+import copy
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -75,6 +77,39 @@ def test_acting_switches_to_eval_once_and_training_switches_back(env):
     assert module.training and all(m.training for m in module.modules())
 
 
+def test_acting_without_autograd_runs_a_trace_with_the_eager_logits_and_new_weights(env):
+    """What an env runner does: acting under no_grad, weights synced in place between calls."""
+    module = build(env)
+    eager = build(env, trace_inference=False)
+    eager.load_state_dict(module.state_dict())
+
+    def both_act(n: int, seed: int) -> None:
+        batch = {Columns.OBS: obs_batch(env, n, seed)}
+        with torch.no_grad():
+            got = module.forward_exploration(batch)[Columns.ACTION_DIST_INPUTS]
+            want = eager.forward_exploration(batch)[Columns.ACTION_DIST_INPUTS]
+        assert torch.equal(got, want)  # bit for bit: the same actions from the same seeds
+
+    module.forward_train({Columns.OBS: obs_batch(env)})  # training: eager, with autograd
+    assert "_trace" not in module.__dict__
+    for n in (8, 3, 31):  # one trace serves every batch size
+        both_act(n, seed=n)
+    assert module.__dict__["_trace"][1] is not None and "_trace" not in eager.__dict__
+    moved = {k: v + 0.01 for k, v in module.get_state().items()}
+    module.set_state(moved)
+    eager.set_state(moved)
+    both_act(8, seed=1)
+    assert module.state_dict().keys() == eager.state_dict().keys()  # the trace is no state
+    twin = copy.deepcopy(module)  # a copy traces its own parameters when it acts
+    assert "_trace" not in twin.__dict__
+    with torch.no_grad():
+        batch = {Columns.OBS: obs_batch(env)}
+        torch.testing.assert_close(
+            twin.forward_exploration(batch)[Columns.ACTION_DIST_INPUTS],
+            module.forward_exploration(batch)[Columns.ACTION_DIST_INPUTS],
+        )
+
+
 @pytest.mark.parametrize("share", [True, False])
 def test_gradients_reach_every_parameter(env, share):
     module = build(env, vf_share_encoders=share)
@@ -101,7 +136,8 @@ def test_default_size_is_small_and_model_config_changes_it(env):
 
 @pytest.mark.parametrize(
     "bad",
-    [{"cnn_channels": []}, {"attn_heads": 5}, {"pi_hiddens": "128"}, {"vf_share_encoders": 1}],
+    [{"cnn_channels": []}, {"attn_heads": 5}, {"pi_hiddens": "128"}, {"vf_share_encoders": 1},
+     {"trace_inference": "yes"}],  # fmt: skip
 )
 def test_bad_model_config_is_a_value_error_naming_the_key(env, bad):
     with pytest.raises(ValueError, match=f"{next(iter(bad))}=.*allowed"):
