@@ -263,4 +263,4 @@ def test_the_scan_sees_the_package() -> None:
     """Guards against a scan that silently finds nothing (wrong root, renamed package)."""
     good, bad = _scan()
     assert len(good) + len(bad) > 50
-    assert any(c.path == "asor/archive.py" and c.function == "StateArchive.insert_many" for c in good)
+    assert any(c.path == "asor/archive.py" and c.function == "StateArchive._insert" for c in good)

@@ -82,7 +82,7 @@ class StateArchive(nn.Module):
             return
         lengths = [sum(len(r) for r in ep.rewards) for ep in closing]
         rewards = torch.cat([r for ep in closing for r in ep.rewards])
-        returns = np.add.reduceat(rewards.double().numpy(), np.cumsum([0, *lengths[:-1]]))
+        returns = np.add.reduceat(rewards.double().cpu().numpy(), np.cumsum([0, *lengths[:-1]]))
         self._insert(
             torch.cat([f for ep in closing for f in ep.features]),
             discounted_return_to_go(rewards, gamma, lengths),
