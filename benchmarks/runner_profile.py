@@ -52,7 +52,7 @@ VARIANTS = {
     "eager": {"model_config": {"trace_inference": False}},
 }
 """Each variant's `env_runners(...)` settings; `model_config` updates race_net's settings."""
-WHATS = ("split", "profile", "rate")
+WHATS = ("split", "profile", "rate", "size")
 
 
 def build_runner(variant: str = "base", algo: str = "asor") -> Any:
@@ -224,6 +224,39 @@ def profile(steps: int, top: int) -> str:
     return out.getvalue()
 
 
+def size(steps: int) -> dict[str, Any]:
+    """What one `sample()` of `steps` env steps hands to Ray for the driver: its episodes
+    pickled as Ray pickles a task's result (protocol 5, numpy arrays as out-of-band buffers),
+    the bytes and the CPU time to pickle and unpickle them (median of 5)."""
+    import pickle
+
+    from ray import cloudpickle
+
+    runner = build_runner()
+    try:
+        sample_n(runner, 512)
+        episodes = runner.sample(num_timesteps=steps, random_actions=False)
+    finally:
+        runner.stop()
+    dumps, loads = [], []
+    for _ in range(5):
+        buffers: list[Any] = []
+        t0 = time.process_time()
+        meta = cloudpickle.dumps(episodes, protocol=5, buffer_callback=buffers.append)
+        dumps.append(time.process_time() - t0)
+        t0 = time.process_time()
+        pickle.loads(meta, buffers=buffers)
+        loads.append(time.process_time() - t0)
+    return {
+        "episodes": len(episodes),
+        "env_steps": sum(len(e) for e in episodes),
+        "pickle_bytes": len(meta),
+        "buffer_bytes": sum(b.raw().nbytes for b in buffers),
+        "dumps_ms": 1000 * statistics.median(dumps),
+        "loads_ms": 1000 * statistics.median(loads),
+    }
+
+
 def rate(variants: list[str], steps: int, rounds: int) -> dict[str, Any]:
     """Env steps/s (wall, and per CPU second of this process) of each variant's runner, the
     variants sampled in turn in each round after a warm-up sample each."""
@@ -305,6 +338,15 @@ def main(argv: list[str] | None = None) -> int:
     if "rate" in whats:
         results["rate"] = rate(variants, args.steps, args.rounds)
         print(rate_table(results["rate"]), flush=True)
+    if "size" in whats:
+        results["size"] = r = size(args.steps)
+        print(
+            f"one sample() of {r['env_steps']} env steps ({r['episodes']} episode chunks): "
+            f"{r['buffer_bytes'] / 1e6:.2f} MB of arrays + {r['pickle_bytes'] / 1e3:.0f} kB "
+            f"pickled around them; pickled in {r['dumps_ms']:.1f} ms, unpickled in "
+            f"{r['loads_ms']:.1f} ms (CPU)",
+            flush=True,
+        )
     (out / "runner_profile.json").write_text(json.dumps(results, indent=1, default=str))
     return 0
 

@@ -116,6 +116,22 @@ PER_MAP_METRICS = ("success_rate", "goal_reward")
 (`rllib_asor.race.curriculum`) judges its stages by."""
 
 
+SLIM_INFO_KEYS = ("reward_terms", "episode_metrics")
+"""Per-step info keys of the race that only a racer's last info needs to carry off a runner."""
+
+
+def slim_infos(agent_episode: Any) -> None:
+    """Drop `SLIM_INFO_KEYS` from every info of one single-agent episode (chunk) but its last
+    (each slimmed info is a new dict: the dicts themselves may be shared with the runner's
+    continuing episode)."""
+    data = getattr(getattr(agent_episode, "infos", None), "data", None)
+    if not isinstance(data, list):
+        return
+    for i, info in enumerate(data[:-1]):
+        if isinstance(info, Mapping) and any(k in info for k in SLIM_INFO_KEYS):
+            data[i] = {k: v for k, v in info.items() if k not in SLIM_INFO_KEYS}
+
+
 def _last_info(agent_episode: Any) -> Mapping[str, Any] | None:
     """The racer's last info that has ``episode_metrics``, or None."""
     for info in reversed(list(agent_episode.get_infos())):
@@ -175,6 +191,18 @@ class RaceMetricsCallback(RLlibCallback):
                         metrics_logger.log_value(
                             ("race", map_key, name), value, reduce="lifetime_sum"
                         )
+
+    def on_sample_end(self, *, samples: list[Any] | None = None, **kwargs: Any) -> None:
+        """The episodes a runner returns keep `SLIM_INFO_KEYS` only in each racer's last info
+        (what `_last_info` and the evaluation summaries read); every other step keeps its
+        other keys (`dynamics_id`, `map_id`, ...). The Learner reads neither key, and they were
+        most of what a runner pickles for the driver (docs/speed.md). Runs after this
+        sample's `on_episode_end` calls, on the returned chunks only (the runner's own
+        continuing episodes keep theirs)."""
+        for chunk in samples or ():
+            agent_episodes = getattr(chunk, "agent_episodes", None)
+            for part in [chunk] if agent_episodes is None else agent_episodes.values():
+                slim_infos(part)
 
     def on_train_result(self, *, algorithm: Any = None, result: dict, **kwargs: Any) -> None:
         race = dict((result.get("env_runners") or {}).get("race") or {})

@@ -105,3 +105,29 @@ def test_per_map_metrics_and_lifetime_totals():
     assert logger.peek(("race", "map_3", "goal_reward_sum")) == pytest.approx(0.3)
     assert logger.peek(("race", "map_5", "success_rate")) == 1.0
     assert logger.peek(("race", "success_rate")) == pytest.approx(2 / 3)
+
+
+def test_returned_chunks_keep_reward_terms_and_metrics_only_in_each_racers_last_info():
+    def info(t: int) -> dict:
+        return {"map_id": 3, "dynamics_id": 3, "reward_terms": {"goal": 0.1 * t},
+                "episode_metrics": metrics(float(t == 3))}  # fmt: skip
+
+    ep = SingleAgentEpisode()
+    ep.add_env_reset(observation=obs(), infos=info(0))
+    for t in (1, 2, 3):
+        ep.add_env_step(obs(), 0, 0.0, infos=info(t), terminated=t == 3)
+    shared = ep.get_infos(1)  # a dict the runner's own continuing episode may still hold
+    multi = MultiAgentEpisode()
+    multi.add_env_reset(observations={"racer_0": obs()}, infos={"racer_0": info(0)})
+    multi.add_env_step(observations={"racer_0": obs()}, actions={"racer_0": 0},
+                       rewards={"racer_0": 0.0}, infos={"racer_0": info(1)})  # fmt: skip
+    RaceMetricsCallback().on_sample_end(samples=[ep, multi])
+    infos = ep.get_infos()
+    assert [sorted(i) for i in infos[:-1]] == [["dynamics_id", "map_id"]] * 3
+    assert infos[-1] == info(3)  # the last: what `_last_info` and evaluation summaries read
+    assert "episode_metrics" in shared  # slimmed as new dicts, the old ones left alone
+    racer = multi.agent_episodes["racer_0"].get_infos()
+    assert sorted(racer[0]) == ["dynamics_id", "map_id"] and racer[-1] == info(1)
+    logger = MetricsLogger()  # the metrics still come from the kept last info
+    RaceMetricsCallback().on_episode_end(episode=ep, metrics_logger=logger, env_index=0)
+    assert logger.peek(("race", "success_rate")) == 1.0
