@@ -386,15 +386,27 @@ def measure_algo(
     rows = args.rows_per_runner
     if "sample" in parts:
 
-        def sample(runner: Any) -> int:
-            return sum(len(e) for e in runner.sample(num_timesteps=rows))
+        def sample(runner: Any) -> tuple[int, float]:
+            t = time.perf_counter()
+            n = sum(len(e) for e in runner.sample(num_timesteps=rows))
+            return n, time.perf_counter() - t
 
         group.foreach_env_runner(sample, local_env_runner=False)  # warm-up
         t0 = time.perf_counter()
-        done = 0
+        done, spread = 0, []
         for _ in range(args.iters):
-            done += sum(group.foreach_env_runner(sample, local_env_runner=False))
+            t = time.perf_counter()
+            calls = group.foreach_env_runner(sample, local_env_runner=False)
+            wall = time.perf_counter() - t
+            done += sum(n for n, _ in calls)
+            secs = [s for _, s in calls]
+            spread.append((statistics.median(secs), max(secs), wall))
         out["sample"] = done / (time.perf_counter() - t0)
+        # The runners' own `sample()` per call: the median runner, the slowest one (all wait
+        # for it in a synchronous loop) and the driver's whole call (episodes stay on the
+        # runners here: what is left over the slowest is the call itself).
+        for i, key in enumerate(("sample_runner_median_s", "sample_runner_max_s", "sample_call_s")):
+            out[key] = statistics.median(x[i] for x in spread)
     if "e2e" in parts:
         for _ in range(args.warmup):
             algorithm.train()
@@ -818,8 +830,16 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                 if parts:
                     row.update(measure_algo(algo, n, args, parts))
                     save()
+                    spread = (
+                        f" (per call: the median runner's sample() {row['sample_runner_median_s']:.3f} s,"
+                        f" the slowest {row['sample_runner_max_s']:.3f} s, the call {row['sample_call_s']:.3f} s)"
+                        if "sample" in parts
+                        else ""
+                    )
                     print(
-                        f"{LABELS[algo]} r{n}: " + ", ".join(f"{p} {row[p]:.0f}" for p in parts),
+                        f"{LABELS[algo]} r{n}: "
+                        + ", ".join(f"{p} {row[p]:.0f}" for p in parts)
+                        + spread,
                         flush=True,
                     )
             if "split" in ray_parts:

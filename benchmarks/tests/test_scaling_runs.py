@@ -36,3 +36,10 @@ def test_the_split_times_asors_piece_inside_an_iteration(tmp_path: Path) -> None
 def test_overlapped_end_to_end_runs_with_asor(tmp_path: Path) -> None:
     [row] = _scaling(tmp_path, "--algos", "asor_overlap", "--parts", "e2e")["rows"]
     assert row["algo"] == "asor_overlap" and row["e2e"] > 0
+
+
+@pytest.mark.slow
+def test_sampling_reports_the_median_and_the_slowest_runner_per_call(tmp_path: Path) -> None:
+    [row] = _scaling(tmp_path, "--algos", "ppo", "--runners", "2", "--parts", "sample")["rows"]
+    assert row["sample"] > 0
+    assert 0 < row["sample_runner_median_s"] <= row["sample_runner_max_s"] <= row["sample_call_s"]
