@@ -70,13 +70,8 @@ class StateArchive(nn.Module):
         chunk since the last `end_call` (the env truncated them); call once per batch, after
         all `add_chunk`s. All closing episodes go through one return-to-go pass and one sort
         per bucket (a batch of a short-episode env closes hundreds)."""
-        closing = [
-            self._open.pop(k)
-            for k in [
-                k for k, ep in self._open.items() if ep.terminated or ep.seen_in_call < self._calls
-            ]
-        ]
-        closing = [ep for ep in closing if any(len(r) for r in ep.rewards)]
+        keys = [k for k, ep in self._open.items() if ep.terminated or ep.seen_in_call < self._calls]
+        closing = [ep for ep in map(self._open.pop, keys) if any(len(r) for r in ep.rewards)]
         self._calls += 1
         if not closing:
             return
