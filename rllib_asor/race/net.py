@@ -22,11 +22,13 @@ whole rest of the network at batch 256 (softmax over 32×32 scores per head); 4 
 attention cheap while still letting it relate e.g. velocity to the distance from the cliff.
 
 The eight action logits are concatenated (``sum(nvec)`` = 24) and read by
-``TorchMultiCategorical``. Acting (exploration and inference without autograd, i.e. on the env
-runners) runs the encoders and the policy head as one TorchScript trace of this module
-(``trace_inference``, default on): the same parameters and outputs, bit for bit, in about half
-the CPU time of the eager forward at 8 rows, which is mostly per-call Python work. Keys of ``model_config`` other than those in ``DEFAULTS`` (RLlib
+``TorchMultiCategorical``. Keys of ``model_config`` other than those in ``DEFAULTS`` (RLlib
 adds its own, e.g. ``fcnet_hiddens``) are ignored.
+
+Acting (exploration and inference without autograd: the env runners, evaluation) runs the
+encoders and the policy head as one TorchScript trace of this module (``trace_inference``,
+default on): the same parameters and outputs, bit for bit, in about half the CPU time of the
+eager forward at 8 rows, which is mostly per-call Python work (docs/speed.md).
 """
 
 from __future__ import annotations
