@@ -252,13 +252,14 @@ def _returns(env, act, episodes: int = 20) -> float:
 def garat_pi0(
     disc_steps: str = "5", disc_input: str = "s_next", grad_penalty: str = "1",
     disc_data: str = "rollouts", grad_penalty_form: str = "zero_centred", iterations: str = "30",
-    target_g: str = "12", disc_norm: str = "target", schedule: str = "ours",
+    target_g: str = "12", disc_norm: str = "target", schedule: str = "ours", batch: str = "2000",
 ) -> None:
     """Run 2 (run 3: `disc_steps` 50; run 4: 50, `disc_input` s_a_delta, `grad_penalty` 0;
     run 5: run 4 with `disc_data` deterministic; run 6: run 5 with `grad_penalty` 10 of form
     one_centred_mix and 80 iterations; run 7: run 5 with 80 iterations; run 8: run 5 with the
     target's gravity 20; run 9: run 5 with `disc_norm` round; run 10: run 5 with `schedule`
-    authors): the grounding under a deterministic π₀ (README.md)."""
+    authors; run 11: run 5 with `batch` 5000): the grounding under a deterministic π₀
+    (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
@@ -279,7 +280,7 @@ def garat_pi0(
     for seed in SEEDS:
         t0 = time.time()
         settings = GaratSettings(
-            grounding_iterations=int(iterations), grounding_batch_size=2000, seed=seed,
+            grounding_iterations=int(iterations), grounding_batch_size=int(batch), seed=seed,
             disc_steps=int(disc_steps), disc_input=disc_input, grad_penalty=float(grad_penalty),
             disc_data=disc_data, grad_penalty_form=grad_penalty_form, disc_norm=disc_norm,
             **AUTHORS_SCHEDULE if schedule == "authors" else {},
@@ -326,6 +327,8 @@ def garat_pi0(
             tag += f"_norm{disc_norm}"
         if schedule != "ours":
             tag += f"_schedule{schedule}"
+        if batch != "2000":
+            tag += f"_batch{batch}"
         print(f"GARAT pi0 ({disc_steps} D steps, {disc_input}, gp {grad_penalty}) seed {seed}: {row}")
         _save(f"{tag}/seed{seed}", row)
 
