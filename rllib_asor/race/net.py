@@ -312,7 +312,8 @@ class RaceNetModule(TorchRLModule, ValueFunctionAPI):
     def _forward(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
         obs = batch[Columns.OBS]
         traced = None
-        if self.settings["trace_inference"] and not (self.training or torch.is_grad_enabled()):
+        acting = not (self.training or torch.is_grad_enabled() or torch.compiler.is_compiling())
+        if self.settings["trace_inference"] and acting:  # (torch.compile traces it itself)
             traced = self._acting_trace(obs)
         if traced is None:
             return {Columns.ACTION_DIST_INPUTS: self.logits(self.encoder(obs))}
