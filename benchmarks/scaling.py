@@ -405,8 +405,10 @@ def measure_algo(
         # The runners' own `sample()` per call: the median runner, the slowest one (all wait
         # for it in a synchronous loop) and the driver's whole call (episodes stay on the
         # runners here: what is left over the slowest is the call itself).
-        for i, key in enumerate(("sample_runner_median_s", "sample_runner_max_s", "sample_call_s")):
-            out[key] = statistics.median(x[i] for x in spread)
+        medians, slowest, calls_s = zip(*spread, strict=True)
+        out["sample_runner_median_s"] = statistics.median(medians)
+        out["sample_runner_max_s"] = statistics.median(slowest)
+        out["sample_call_s"] = statistics.median(calls_s)
     if "e2e" in parts:
         for _ in range(args.warmup):
             algorithm.train()

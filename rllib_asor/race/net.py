@@ -311,10 +311,9 @@ class RaceNetModule(TorchRLModule, ValueFunctionAPI):
 
     def _forward(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
         obs = batch[Columns.OBS]
-        traced = None
         acting = not (self.training or torch.is_grad_enabled() or torch.compiler.is_compiling())
-        if self.settings["trace_inference"] and acting:  # (torch.compile traces it itself)
-            traced = self._acting_trace(obs)
+        # (under torch.compile, dynamo traces the eager forward itself)
+        traced = self._acting_trace(obs) if acting and self.settings["trace_inference"] else None
         if traced is None:
             return {Columns.ACTION_DIST_INPUTS: self.logits(self.encoder(obs))}
         return {Columns.ACTION_DIST_INPUTS: traced(*(obs[k] for k in ACTING_KEYS))}
