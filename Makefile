@@ -56,12 +56,12 @@ smoke: $(STAMP)
 # at once finish the suite in about two thirds of the time. TEST_WORKERS=0 runs them one by one.
 TEST_WORKERS ?= 2
 test: $(STAMP) $(DEMOS)
-	$(PY) -m pytest -q --timeout=900 --durations=30 -n $(TEST_WORKERS)
+	$(PY) -m pytest -q --timeout=900 --durations=30 -n $(TEST_WORKERS) --dist worksteal
 
 # The `slow` tests: long end-to-end runs, and runs whose behaviour a faster test in `make test`
 # covers (each names it). About half an hour on 2 cores.
 test-slow: $(STAMP) $(DEMOS)
-	$(PY) -m pytest -q -m slow --timeout=1800 --durations=20 -n $(TEST_WORKERS)
+	$(PY) -m pytest -q -m slow --timeout=1800 --durations=20 -n $(TEST_WORKERS) --dist worksteal
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check rllib_asor game_env tests benchmarks studies mkdocs_hooks.py

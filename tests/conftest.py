@@ -13,6 +13,25 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
+# Tests that request these start Ray (actors, a Tune run, an RLlib Algorithm) or build a
+# dataset: seconds to a minute each, where most tests take milliseconds. Files that start Ray
+# or a subprocess otherwise say so with `pytestmark = pytest.mark.heavy`.
+_HEAVY_FIXTURES = frozenset({"ray_session", "cli_ray", "hopper_offline_data"})
+
+
+def _heavy(item: pytest.Item) -> bool:
+    return bool(_HEAVY_FIXTURES.intersection(item.fixturenames)) or (
+        item.get_closest_marker("heavy") is not None
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Files with a heavy test run first, each file kept whole and in its order, so that the two
+    `make test` workers (`--dist worksteal`) end on short tests and finish together."""
+    heavy = {item.path for item in items if _heavy(item)}
+    items.sort(key=lambda item: item.path not in heavy)
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _one_torch_thread():
     import torch

@@ -15,6 +15,8 @@ from scipy.stats import trim_mean
 from rllib_asor.cli import report as cli
 from rllib_asor.report import render, summary
 
+pytestmark = pytest.mark.heavy  # starts Ray or a subprocess: scheduled first (conftest)
+
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 

@@ -14,6 +14,8 @@ import pytest
 
 from tests.cli.helpers import rllib_commands
 
+pytestmark = pytest.mark.heavy  # starts Ray or a subprocess: scheduled first (conftest)
+
 RLLIB = str(Path(sys.executable).with_name("rllib"))
 
 MYENVS = '''

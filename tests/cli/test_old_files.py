@@ -15,6 +15,8 @@ from rllib_asor.cli import experiment, retired
 from rllib_asor.cli.errors import UsageError
 from tests.cli.test_e2e import run_cli
 
+pytestmark = pytest.mark.heavy  # starts Ray or a subprocess: scheduled first (conftest)
+
 OLD = Path(__file__).parent / "old_files"
 RLLIB = str(Path(sys.executable).with_name("rllib"))
 

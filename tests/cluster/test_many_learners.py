@@ -111,7 +111,7 @@ def _local_sampling(make: Any) -> Any:
 def test_asor_trains_on_two_learners_with_one_state(make, ray_session, tmp_path):
     algo = _local_sampling(make).build_algo()
     try:
-        for _ in range(3):
+        for _ in range(2):
             result = algo.train()
         asor = result["asor"]
         assert all(math.isfinite(asor[k]) for k in FINITE), asor

@@ -21,6 +21,8 @@ from ray.cluster_utils import Cluster
 from rllib_asor.algorithms.common.faults import with_fault_tolerance
 from tests.cluster.helpers import RESTART_DEADLINE_S, assert_asor_metrics, lava_ppo_asor
 
+pytestmark = pytest.mark.heavy  # starts Ray or a subprocess: scheduled first (conftest)
+
 REPO = Path(__file__).resolve().parents[2]
 RLLIB = str(Path(sys.executable).with_name("rllib"))
 NODE = {"num_cpus": 1, "object_store_memory": 80 * 1024**2}

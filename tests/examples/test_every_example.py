@@ -17,6 +17,8 @@ import pytest
 from rllib_asor.cli import experiment
 from rllib_asor.cli.errors import UsageError
 
+pytestmark = pytest.mark.heavy  # starts Ray or a subprocess: scheduled first (conftest)
+
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = sorted((REPO / "tuned_examples").rglob("*.yaml"))
 DEMOS = REPO / "tuned_examples/paper/demonstrations"

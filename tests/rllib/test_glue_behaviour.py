@@ -32,6 +32,8 @@ from rllib_asor.rllib.connector import AddDynamicsIdsToBatch, AsorRewardConnecto
 from rllib_asor.rllib.learners import asor_module_id, is_aux_module
 from tests.asor.test_state_behaviour import pieces
 
+pytestmark = pytest.mark.heavy  # starts Ray or a subprocess: scheduled first (conftest)
+
 OBS = gym.spaces.Box(-10, 10, (3,), np.float32)
 ACT = gym.spaces.Discrete(2)
 DISC = asor_module_id(DEFAULT_MODULE_ID)

@@ -26,6 +26,8 @@ from tests.rllib.test_glue_behaviour import (
     module_batch,
 )
 
+pytestmark = pytest.mark.heavy  # starts Ray or a subprocess: scheduled first (conftest)
+
 SETTINGS = {
     "paper": {"preset": "paper", "lambda_": 0.3},
     # the ensemble proxy: its batches carry actions and s′ besides the states

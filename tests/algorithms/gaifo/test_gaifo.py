@@ -19,6 +19,8 @@ from rllib_asor.algorithms.gaifo.reward import gaifo_loss, imitation_reward, tra
 from rllib_asor.algorithms.gaifo.settings import GaifoSettings
 from rllib_asor.algorithms.gaifo.trainer import GaifoTrainer
 
+pytestmark = pytest.mark.heavy  # starts Ray or a subprocess: scheduled first (conftest)
+
 LAVA = "rllib_asor/LavaWorld-v0"
 
 

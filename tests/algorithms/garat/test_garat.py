@@ -15,6 +15,8 @@ from rllib_asor.algorithms.common.demonstrations import rollout_demonstrations, 
 from rllib_asor.algorithms.garat.config import GaratConfig
 from rllib_asor.algorithms.garat.envs import GroundedEnv, GroundingEnv
 
+pytestmark = pytest.mark.heavy  # starts Ray or a subprocess: scheduled first (conftest)
+
 SOURCE, TARGET = {"g": 10.0}, {"g": 12.0}
 
 
