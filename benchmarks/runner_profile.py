@@ -50,9 +50,11 @@ VARIANTS = {
     "async": {"gym_env_vectorize_mode": "async"},
     "async16": {"gym_env_vectorize_mode": "async", "num_envs_per_env_runner": 16},
     "eager": {"model_config": {"trace_inference": False}},
+    "fullinfo": {"env_config": {"step_info": "full"}},
 }
-"""Each variant's `env_runners(...)` settings; `model_config` updates race_net's settings."""
-WHATS = ("split", "profile", "rate", "size")
+"""Each variant's `env_runners(...)` settings; `model_config` updates race_net's settings and
+`env_config` the race env's (`fullinfo`: every step's info whole, as before `step_info`)."""
+WHATS = ("split", "profile", "rate", "size", "infos")
 
 
 def build_runner(variant: str = "base", algo: str = "asor") -> Any:
@@ -68,6 +70,8 @@ def build_runner(variant: str = "base", algo: str = "asor") -> Any:
         config = config.rl_module(
             model_config={**config.model_config, **settings.pop("model_config")}
         )
+    if "env_config" in settings:
+        config = config.environment(env_config={**config.env_config, **settings.pop("env_config")})
     config = config.env_runners(**settings)
     return SingleAgentEnvRunner(config=config)
 
@@ -257,6 +261,40 @@ def size(steps: int) -> dict[str, Any]:
     }
 
 
+def infos(steps: int, rounds: int, envs: int = 8) -> dict[str, list[float]]:
+    """CPU µs per env step of a runner's vector env alone (gymnasium's sync vector env and
+    RLlib's `DictInfoToList` over `envs` race envs, random maps, the same random actions) with
+    the race's `step_info` "full" and "lean", the two in turn in each round (same courses)."""
+    import gymnasium as gym
+    import numpy as np
+    from gymnasium.wrappers.vector import DictInfoToList
+
+    from rllib_asor.race.config import make_single_race_env
+
+    def vector_env(mode: str) -> Any:
+        cfg = {"map_id": "random", "max_episode_steps": 1000, "step_info": mode}
+        return DictInfoToList(gym.vector.SyncVectorEnv([lambda: make_single_race_env(cfg)] * envs))
+
+    venvs = {mode: vector_env(mode) for mode in ("full", "lean")}
+    rng = np.random.default_rng(0)
+    nvec = venvs["full"].single_action_space.nvec
+    actions = rng.integers(0, nvec, size=(64, envs, len(nvec)))
+    out: dict[str, list[float]] = {mode: [] for mode in venvs}
+    try:
+        for r in range(rounds):
+            for mode, venv in venvs.items():
+                venv.reset(seed=r)
+                n = max(steps // envs, 1)
+                t0 = time.process_time()
+                for i in range(n):
+                    venv.step(actions[i % 64])
+                out[mode].append(1e6 * (time.process_time() - t0) / (n * envs))
+    finally:
+        for venv in venvs.values():
+            venv.close()
+    return out
+
+
 def rate(variants: list[str], steps: int, rounds: int) -> dict[str, Any]:
     """Env steps/s (wall, and per CPU second of this process) of each variant's runner, the
     variants sampled in turn in each round after a warm-up sample each."""
@@ -338,6 +376,11 @@ def main(argv: list[str] | None = None) -> int:
     if "rate" in whats:
         results["rate"] = rate(variants, args.steps, args.rounds)
         print(rate_table(results["rate"]), flush=True)
+    if "infos" in whats:
+        results["infos"] = infos(args.steps, args.rounds)
+        for mode, per_round in results["infos"].items():
+            print(f"step_info {mode}: CPU µs per env step of the vector env, median "
+                  f"{statistics.median(per_round):.0f} ({', '.join(f'{x:.0f}' for x in per_round)})")
     if "size" in whats:
         results["size"] = r = size(args.steps)
         print(

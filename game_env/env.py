@@ -24,6 +24,10 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
             ``gymnasium.make`` is honoured too).
         frame_skip: MuJoCo steps per env step (timestep 2 ms).
         render_mode: None or "rgb_array"; ``width``/``height`` size the frames.
+        step_info: "full" (default): every step's info has ``reward_terms`` and the running
+            ``episode_metrics``; "lean": neither, except ``episode_metrics`` on the step this
+            env ends the episode (its own ``max_episode_steps``; a ``TimeLimit`` given to
+            ``gymnasium.make`` ends it unseen). The race's RLlib configs use "lean".
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
@@ -37,9 +41,10 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
         render_mode: str | None = None,
         width: int = 320,
         height: int = 240,
+        step_info: str = "full",
     ) -> None:
         self._max_steps = self._setup(1, map_id, course_seed, max_episode_steps, frame_skip, render_mode,
-                                      width, height)
+                                      width, height, step_info)
         self.observation_space = observation_space()
         self.action_space = action_space()
 
@@ -69,9 +74,10 @@ class ObstacleRaceEnv(RaceSimEnvMixin, gym.Env):
         terminated = bool(done[0])
         truncated = sim.steps >= sim.max_episode_steps or err is not None
         self._warn_physics(err)
-        # Every step: running values, final on the last step. (An outer TimeLimit from
-        # gymnasium.make(max_episode_steps=...) truncates without this env knowing.)
-        info["episode_metrics"] = sim.episode_metrics(0)
+        # "full": every step running values, final on the last step (an outer TimeLimit from
+        # gymnasium.make(max_episode_steps=...) truncates without this env knowing).
+        if self.step_info == "full" or terminated or truncated:
+            info["episode_metrics"] = sim.episode_metrics(0)
         return {k: v[0] for k, v in obs.items()}, reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:

@@ -18,6 +18,7 @@ from game_env.options import (
     check_positive_int,
     check_render_mode,
     check_reset_options,
+    check_step_info,
     first_map,
 )
 from game_env.sim import RaceSim
@@ -35,9 +36,10 @@ class RaceSimEnvMixin:
     render_mode: str | None
     width: int
     height: int
+    step_info: str
 
     def _setup(self, num_racers: int, map_id: Any, course_seed: Any, max_episode_steps: Any, frame_skip: Any,
-               render_mode: Any, width: Any, height: Any) -> int:
+               render_mode: Any, width: Any, height: Any, step_info: Any = "full") -> int:
         """Check the constructor arguments both envs take (a ``ValueError`` names a bad one) and
         build the simulator on the first course; returns the checked ``max_episode_steps``."""
         self._map_choice = check_map_choice(map_id)
@@ -47,6 +49,7 @@ class RaceSimEnvMixin:
         self.render_mode = check_render_mode(render_mode)
         self.width = check_positive_int("width", width, 16, 4096)
         self.height = check_positive_int("height", height, 16, 4096)
+        self.step_info = check_step_info(step_info)
         self.sim = RaceSim(num_racers, self.frame_skip, max_steps)
         self._renderer = None
         self.sim.load(first_map(self._map_choice), 0 if self._course_seed is None else self._course_seed)
@@ -116,9 +119,10 @@ class RaceSimEnvMixin:
         return {"map_id": sim.map_id, "dynamics_id": sim.map_id, "course_seed": sim.course_seed}
 
     def _step_info(self, terms: dict[str, float], err: str | None) -> dict[str, Any]:
-        """One racer's step info: its ``reward_terms``, the course info and, after a physics
-        blow-up, ``physics_error`` (the caller truncates)."""
-        info: dict[str, Any] = {"reward_terms": terms, **self._course_info()}
+        """One racer's step info: its ``reward_terms`` (not with ``step_info="lean"``), the
+        course info and, after a physics blow-up, ``physics_error`` (the caller truncates)."""
+        course = self._course_info()
+        info = {"reward_terms": terms, **course} if self.step_info == "full" else course
         if err is not None:
             info["physics_error"] = err
         return info

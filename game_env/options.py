@@ -66,6 +66,18 @@ def check_course_seed(seed: Any) -> int | None:
     return check_positive_int("course_seed", seed, low=0)
 
 
+STEP_INFOS = ("full", "lean")
+"""``step_info`` values: "full" (every step's info has ``reward_terms``; the Gymnasium env's has
+running ``episode_metrics`` too), "lean" (``reward_terms`` nowhere, ``episode_metrics`` only in
+the info of the step the env itself ends the episode on)."""
+
+
+def check_step_info(value: Any) -> str:
+    if value not in STEP_INFOS:
+        raise ValueError(f"step_info={value!r} is not valid; allowed: one of {STEP_INFOS}")
+    return value
+
+
 def check_render_mode(mode: Any) -> str | None:
     if mode not in (None, "rgb_array"):
         raise ValueError(f"render_mode={mode!r} is not supported; allowed: None or 'rgb_array'")

@@ -22,7 +22,8 @@ _IDLE = (1, 1, 0, 0, 0, 0, 0, 1)  # what a racer without an action this step doe
 class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
     """N racers ("racer_0", ...) race the same course; a finished racer leaves ``agents``.
 
-    Arguments as ``ObstacleRaceEnv`` plus ``num_racers`` (1..16).
+    Arguments as ``ObstacleRaceEnv`` plus ``num_racers`` (1..16); ``episode_metrics`` come in
+    each racer's last info only, and ``step_info="lean"`` leaves out ``reward_terms``.
     """
 
     metadata = {"name": "obstacle_race_v0", "render_modes": ["rgb_array"], "render_fps": 25,
@@ -38,10 +39,11 @@ class RaceParallelEnv(RaceSimEnvMixin, ParallelEnv):
         render_mode: str | None = None,
         width: int = 320,
         height: int = 240,
+        step_info: str = "full",
     ) -> None:
         self.num_racers = check_positive_int("num_racers", num_racers, 1, MAX_RACERS)
         self.max_episode_steps = self._setup(self.num_racers, map_id, course_seed, max_episode_steps, frame_skip,
-                                             render_mode, width, height)
+                                             render_mode, width, height, step_info)
         self.possible_agents = [f"racer_{i}" for i in range(self.num_racers)]
         self.agents: list[str] = []
         self._rng, _ = seeding.np_random(None)

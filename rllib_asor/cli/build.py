@@ -155,6 +155,8 @@ def build_algo_config(exp: Experiment, choice: dict[grid.Path, Any] | None = Non
             values = {**family.config_defaults, **values}
         model_config = values.pop("model_config", None)
         env_config = values.pop("env_config", None) or {}
+        if family is not None:
+            env_config = {**family.env_config_defaults, **env_config}
         connector = values.pop("env_to_module_connector", None)
         rl_module = values.pop("rl_module", None)
         multi = values.pop("multi_agent", None)

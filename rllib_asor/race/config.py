@@ -242,7 +242,8 @@ def race_ppo_config(
             policy ``"shared"`` for all racers.
         map_id: 0..9, or None / "random" for a random map per episode (the env's rule).
         max_episode_steps: episode length limit (None: the env's default, 1000).
-        env_config: further env keyword arguments (``course_seed``, ``frame_skip``, ...).
+        env_config: further env keyword arguments (``course_seed``, ``frame_skip``,
+            ``step_info``: "lean" unless given, ...).
         model_config: `RaceNetModule` settings (see `rllib_asor.race.net.DEFAULTS`).
         curriculum: a `MapCurriculum` (or its dict, as the YAML block) to train over maps
             in stages (`rllib_asor.race.curriculum`); its stages override `map_id`.
@@ -254,7 +255,9 @@ def race_ppo_config(
     if not isinstance(num_racers, int) or isinstance(num_racers, bool) or num_racers < 1:
         raise ValueError(f"num_racers={num_racers!r} is invalid: allowed an integer ≥ 1")
     register_race_envs()
-    cfg: dict[str, Any] = {**dict(env_config or {}), "map_id": map_id}
+    # The per-step reward terms and running metrics are left out (`step_info="lean"`): the
+    # callback reads the finished episode's metrics only (docs/speed.md).
+    cfg: dict[str, Any] = {"step_info": "lean", **dict(env_config or {}), "map_id": map_id}
     if max_episode_steps is not None:
         cfg["max_episode_steps"] = max_episode_steps
     module_spec = RLModuleSpec(module_class=RaceNetModule, model_config=dict(model_config or {}))

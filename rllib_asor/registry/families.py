@@ -28,6 +28,8 @@ class EnvFamily:
     """`rl_module.module_class` used when the experiment names none (rllib_asor.registry.models)."""
     config_defaults: Mapping[str, Any] = field(default_factory=dict)
     """Config keys set when the experiment does not set them."""
+    env_config_defaults: Mapping[str, Any] = field(default_factory=dict)
+    """`env_config` keys set when the experiment does not set them."""
     curriculum: Callable[[Mapping[str, Any]], type] | None = None
     """Builds the callbacks class of a `curriculum:` block (ValueError/TypeError if invalid);
     None: the family has no curriculum."""
@@ -56,13 +58,16 @@ RACE = EnvFamily(
     metrics_callbacks=_race_metrics,
     default_module="race_net",
     config_defaults={"normalize_actions": False, "clip_actions": False},
+    env_config_defaults={"step_info": "lean"},
     curriculum=_race_curriculum,
 )
 """The obstacle race (single and multi-racer): race/... metrics, the paper's network, a map
 curriculum; `--test` episodes end after 100 steps so race metrics appear in 2 × 256 steps.
 Its actions are discrete (MultiDiscrete): RLlib's action unsquash/clip leave them as they are
 but deep-copy and walk every sampled action (~4 % of race sampling), so they are off unless the
-experiment sets them (`race_ppo_config` uses the same defaults)."""
+experiment sets them (`race_ppo_config` uses the same defaults). Its envs leave out the per-step
+reward terms and running metrics no Learner or callback reads (`step_info: lean`, the finished
+episode's metrics kept; ~X % of a runner's time, docs/speed.md) unless `env_config` sets it."""
 
 FAMILIES: tuple[EnvFamily, ...] = (RACE,)
 

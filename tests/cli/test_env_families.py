@@ -58,6 +58,23 @@ def test_race_actions_are_not_unsquashed_unless_the_file_asks(tmp_path: Path, gi
     assert race_ppo_config().normalize_actions is False
 
 
+@pytest.mark.parametrize("given, expected", [("", "lean"), ("step_info: full, ", "full")])
+def test_race_envs_leave_out_per_step_terms_unless_the_file_asks(tmp_path: Path, given, expected):
+    """No Learner or callback reads the race's per-step reward terms and running metrics."""
+    from rllib_asor.race.config import race_ppo_config
+
+    path = tmp_path / "x.yaml"
+    path.write_text(
+        "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  stop: {training_iteration: 2}\n"
+        f"  config: {{env_config: {{{given}map_id: 2}}}}\n"
+    )
+    config = experiment.validate(experiment.load_file(str(path))[0])
+    assert config.env_config == {"step_info": expected, "map_id": 2}
+    assert race_ppo_config().env_config["step_info"] == "lean"
+    full = race_ppo_config(env_config={"step_info": "full"})
+    assert full.env_config["step_info"] == "full"
+
+
 def test_drop_bootstrap_rows_in_a_ppo_file_gets_the_lean_learner(tmp_path: Path):
     from rllib_asor.algorithms.ppo.lean import LeanPPOTorchLearner
 

@@ -60,6 +60,51 @@ def test_reward_equals_sum_of_info_terms_and_metrics_at_episode_end():
     assert 0.0 <= m["unnecessary_jump_rate"] <= 1.0 and m["distance_from_cliff"] >= 0.0
 
 
+def _run(env, steps: int, seed: int = 3) -> list[tuple]:
+    env.reset(seed=seed)
+    rng, out = np.random.default_rng(0), []
+    for _ in range(steps):
+        obs, reward, term, trunc, info = env.step(rng.integers(0, env.action_space.nvec))
+        out.append((obs, reward, term, trunc, info))
+        if term or trunc:
+            break
+    return out
+
+
+def test_lean_step_info_leaves_out_reward_terms_and_running_metrics_and_nothing_else():
+    """The same race as "full": the same observations, rewards and ends; the course keys on
+    every step and the final episode metrics on the last."""
+    full = _run(ObstacleRaceEnv(map_id=0, course_seed=1, max_episode_steps=60), 60)
+    lean = _run(ObstacleRaceEnv(map_id=0, course_seed=1, max_episode_steps=60, step_info="lean"), 60)
+    assert len(full) == len(lean) == 60 and lean[-1][3]
+    for (o1, r1, te1, tr1, i1), (o2, r2, te2, tr2, i2) in zip(full, lean, strict=True):
+        assert all(np.array_equal(o1[k], o2[k]) for k in o1) and (r1, te1, tr1) == (r2, te2, tr2)
+        assert {k: v for k, v in i1.items() if k not in ("reward_terms", "episode_metrics")} == {
+            k: v for k, v in i2.items() if k != "episode_metrics"
+        }
+    assert all("reward_terms" not in info and "episode_metrics" not in info for *_, info in lean[:-1])
+    assert lean[-1][4]["episode_metrics"] == full[-1][4]["episode_metrics"]
+    assert "reward_terms" not in lean[-1][4]
+
+
+def test_lean_step_info_in_the_parallel_env_leaves_out_reward_terms():
+    env = game_env.parallel_env(num_racers=2, map_id=4, max_episode_steps=30, step_info="lean")
+    env.reset(seed=0)
+    for _ in range(30):
+        _, _, term, trunc, infos = env.step({a: env.action_space(a).sample() for a in env.agents})
+        assert all("reward_terms" not in info for info in infos.values())
+        if not env.agents:
+            break
+    assert all(set(info["episode_metrics"]) == set(EPISODE_METRICS) for info in infos.values())
+
+
+def test_an_unknown_step_info_is_refused_naming_the_allowed_ones():
+    with pytest.raises(ValueError, match=r"step_info='some'.*\('full', 'lean'\)"):
+        ObstacleRaceEnv(step_info="some")
+    with pytest.raises(ValueError, match="step_info"):
+        game_env.parallel_env(num_racers=2, step_info=None)
+
+
 @pytest.mark.parametrize("map_id", [-1, 10, 3.5, "3", True])
 def test_unknown_map_id_raises_value_error_naming_value_and_range(map_id):
     with pytest.raises(ValueError, match=r"map_id=.*0\.\.9"):
