@@ -32,14 +32,17 @@ variants built once and sampled in interleaved rounds (a fair ratio on a shared 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import cProfile
 import functools
+import importlib
 import json
 import os
 import pstats
 import statistics
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -51,9 +54,12 @@ VARIANTS = {
     "async16": {"gym_env_vectorize_mode": "async", "num_envs_per_env_runner": 16},
     "eager": {"model_config": {"trace_inference": False}},
     "fullinfo": {"env_config": {"step_info": "full"}},
+    "rllib_unbatch": {"rllib_unbatch": True},
 }
 """Each variant's `env_runners(...)` settings; `model_config` updates race_net's settings and
-`env_config` the race env's (`fullinfo`: every step's info whole, as before `step_info`)."""
+`env_config` the race env's (`fullinfo`: every step's info whole, as before `step_info`);
+`rllib_unbatch` samples with RLlib's own `unbatch` (`ray_compat.fast_unbatch` undone while it
+samples)."""
 WHATS = ("split", "profile", "rate", "size", "infos")
 
 
@@ -66,6 +72,7 @@ def build_runner(variant: str = "base", algo: str = "asor") -> Any:
     args = scaling.settle(scaling.build_parser().parse_args(["--runners", "1"]))
     config = scaling.race_config(algo, args, 0)
     settings = dict(VARIANTS[variant])
+    settings.pop("rllib_unbatch", None)
     if "model_config" in settings:
         config = config.rl_module(
             model_config={**config.model_config, **settings.pop("model_config")}
@@ -295,6 +302,25 @@ def infos(steps: int, rounds: int, envs: int = 8) -> dict[str, list[float]]:
     return out
 
 
+@contextlib.contextmanager
+def rllib_unbatch(on: bool) -> Iterator[None]:
+    """While on: the per-step callers of `unbatch` use RLlib's own (`ray_compat._UNBATCH_USERS`)."""
+    from ray.rllib.utils.spaces.space_utils import unbatch
+
+    from rllib_asor import ray_compat
+
+    modules = [(importlib.import_module(m), name) for m, name in ray_compat._UNBATCH_USERS]
+    saved = [getattr(m, name) for m, name in modules]
+    try:
+        if on:
+            for m, name in modules:
+                setattr(m, name, unbatch)
+        yield
+    finally:
+        for (m, name), fn in zip(modules, saved, strict=True):
+            setattr(m, name, fn)
+
+
 def rate(variants: list[str], steps: int, rounds: int) -> dict[str, Any]:
     """Env steps/s (wall, and per CPU second of this process) of each variant's runner, the
     variants sampled in turn in each round after a warm-up sample each."""
@@ -306,7 +332,8 @@ def rate(variants: list[str], steps: int, rounds: int) -> dict[str, Any]:
         for _ in range(rounds):
             for v, r in runners.items():
                 t0, c0 = time.perf_counter(), time.process_time()
-                n = sample_n(r, steps)
+                with rllib_unbatch(VARIANTS[v].get("rllib_unbatch", False)):
+                    n = sample_n(r, steps)
                 rows[v]["wall"].append(n / (time.perf_counter() - t0))
                 rows[v]["cpu"].append(n / max(time.process_time() - c0, 1e-9))
     finally:

@@ -67,7 +67,7 @@ Its actions are discrete (MultiDiscrete): RLlib's action unsquash/clip leave the
 but deep-copy and walk every sampled action (~4 % of race sampling), so they are off unless the
 experiment sets them (`race_ppo_config` uses the same defaults). Its envs leave out the per-step
 reward terms and running metrics no Learner or callback reads (`step_info: lean`, the finished
-episode's metrics kept; ~X % of a runner's time, docs/speed.md) unless `env_config` sets it."""
+episode's metrics kept; docs/speed.md) unless `env_config` sets it."""
 
 FAMILIES: tuple[EnvFamily, ...] = (RACE,)
 
