@@ -35,9 +35,16 @@ Policy = Callable[[dict[str, np.ndarray], list[Any]], np.ndarray]
 
 
 def evaluate(
-    policy: Policy, episodes: int, max_steps: int, maps: Sequence[int] | None = None
+    policy: Policy | Callable[[list[Any]], Policy],
+    episodes: int,
+    max_steps: int,
+    maps: Sequence[int] | None = None,
+    *,
+    needs_envs: bool = False,
 ) -> dict[str, Any]:
-    """Run `policy` on each map (default: all ten) × `episodes` course seeds.
+    """Run `policy` on each map (default: all ten) × `episodes` course seeds; with
+    `needs_envs`, `policy(envs)` makes the policy from the evaluation's envs (a policy that
+    reads the simulator, such as `game_env.scripted.ScriptedRacer`).
 
     Returns the per-map mean of each column (`per_map[map][key]`), the mean over the maps
     (`mean[key]`) and the per-episode metrics (`episodes`: [map, course seed, metrics]).
@@ -50,8 +57,9 @@ def evaluate(
     pairs = [(m, EVAL_SEED0 + e) for m in maps for e in range(episodes)]
     # The limit goes to the constructor (a TimeLimit wrapper alone is not seen by the env).
     envs = [ObstacleRaceEnv(map_id=m, course_seed=s, max_episode_steps=max_steps) for m, s in pairs]
+    act = policy(envs) if needs_envs else policy
     try:
-        done = play(envs, [s for _, s in pairs], lambda obs, infos: policy(stack_obs(obs), infos))
+        done = play(envs, [s for _, s in pairs], lambda obs, infos: act(stack_obs(obs), infos))
     finally:
         for env in envs:
             env.close()

@@ -127,18 +127,17 @@ def random_policy(seed: int = 0) -> Any:
     return lambda batch, envs: np.stack([space.sample() for _ in envs])
 
 
-def scripted_policy() -> Any:
+def scripted_policy(envs: list[Any]) -> Any:
+    """The scripted racer on each of `envs` (it reads the simulator), found for each info by
+    its course (`map_id`, `course_seed`: one env each in the race's evaluation)."""
     from game_env.scripted import ScriptedRacer
 
-    racers: dict[int, Any] = {}
+    racers = {(env.sim.map_id, env.sim.course_seed): ScriptedRacer(env) for env in envs}
+    if len(racers) != len(envs):
+        raise ValueError("scripted_policy: two envs race the same course")
 
-    def act(batch: dict[str, np.ndarray], envs: list[Any]) -> np.ndarray:
-        out = []
-        for env in envs:
-            if id(env) not in racers:
-                racers[id(env)] = ScriptedRacer(env)
-            out.append(racers[id(env)].act())
-        return np.stack(out)
+    def act(batch: dict[str, np.ndarray], infos: list[Any]) -> np.ndarray:
+        return np.stack([racers[info["map_id"], info["course_seed"]].act() for info in infos])
 
     return act
 
@@ -197,12 +196,13 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
 
 def reference_rows(out: Path, args: argparse.Namespace) -> None:
     """Scripted racer and random policy on the evaluation episodes (written once)."""
-    for name, make in (("scripted", scripted_policy), ("random", random_policy)):
+    for name, policy, needs_envs in (("scripted", scripted_policy, True),
+                                     ("random", random_policy(), False)):  # fmt: skip
         path = out / "reference" / f"{name}.json"
         if path.exists():
             continue
         t0 = time.time()
-        ev = evaluate(make(), args.eval_episodes, args.max_episode_steps)
+        ev = evaluate(policy, args.eval_episodes, args.max_episode_steps, needs_envs=needs_envs)
         write_json(path, {"method": name, "eval": ev, "eval_wall_s": time.time() - t0})
 
 

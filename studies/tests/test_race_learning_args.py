@@ -61,3 +61,14 @@ def test_runs_made_otherwise_compares_recorded_keys_and_defaults(tmp_path: Path)
     ]
     with_default = runs_made_otherwise(tmp_path, ["a"], range(4), {"layout": "E"}, {"layout": "B"})
     assert with_default == ["a-1.json (layout='B')", "a-2.json (layout='B')"]
+
+
+def test_the_reference_racers_run_through_the_races_evaluation() -> None:
+    """The scripted racer reads each evaluation env's simulator (`needs_envs`); on map 0 it
+    collects goal reward in 300 steps where the random policy collects none."""
+    from rllib_asor.race.evaluation import evaluate
+    from studies.lib.race_learning import random_policy, scripted_policy
+
+    scripted = evaluate(scripted_policy, 1, 300, maps=[0], needs_envs=True)
+    random = evaluate(random_policy(), 1, 300, maps=[0])
+    assert scripted["per_map"][0]["goal_reward"] > random["per_map"][0]["goal_reward"]
