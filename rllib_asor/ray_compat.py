@@ -20,6 +20,11 @@ It sits at the package's top, not in `rllib/`, because the layers below the glue
 importing `rllib_asor.rllib`) as well as `registry/` and `cli/`; it imports nothing of ours, so
 every layer may import it. `asor/` and `envs/` never do (no Ray there). Ray is imported lazily
 inside each function: importing this module costs nothing.
+
+`fast_rllib()` is the one place that replaces names inside RLlib's modules, each with a function
+that gives RLlib's result faster (the `inspect` of its connector module, its per-step
+`unbatch`); our Learners' module and the RLlib glue call it on import, so every process that
+builds our Algorithms has it (docs/speed.md).
 """
 
 from __future__ import annotations
