@@ -305,7 +305,6 @@ def _unbatch(batches_struct: Any) -> list[Any]:
     plain dict of numpy arrays one dict per row (its keys in its order, as `unflatten_as`);
     anything else goes to RLlib's."""
     import numpy as np
-    from ray.rllib.utils.spaces.space_utils import unbatch
 
     if type(batches_struct) is np.ndarray and batches_struct.ndim:
         return list(batches_struct)
@@ -318,6 +317,8 @@ def _unbatch(batches_struct: Any) -> list[Any]:
         rows = len(batches_struct[min(batches_struct)])  # RLlib: the first leaf, keys sorted
         items = batches_struct.items()
         return [{k: v[i] for k, v in items} for i in range(rows)]
+    from ray.rllib.utils.spaces.space_utils import unbatch
+
     return unbatch(batches_struct)
 
 

@@ -43,17 +43,22 @@ def test_curriculum_outside_a_family_that_has_one_names_the_allowed_envs(tmp_pat
         experiment.validate(experiment.load_file(str(path))[0])
 
 
+def _validated_race_file(tmp_path: Path, config: str):
+    """The validated config of a one-experiment race PPO file whose `config:` is `config`."""
+    path = tmp_path / "x.yaml"
+    path.write_text(
+        "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  stop: {training_iteration: 2}\n"
+        f"  config: {config}\n"
+    )
+    return experiment.validate(experiment.load_file(str(path))[0])
+
+
 @pytest.mark.parametrize("given, expected", [("", False), ("normalize_actions: true, ", True)])
 def test_race_actions_are_not_unsquashed_unless_the_file_asks(tmp_path: Path, given, expected):
     """The race's actions are discrete: RLlib's unsquash/clip are no-ops there (and cost time)."""
     from rllib_asor.race.config import race_ppo_config
 
-    path = tmp_path / "x.yaml"
-    path.write_text(
-        "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  stop: {training_iteration: 2}\n"
-        f"  config: {{{given}lr: 0.001}}\n"
-    )
-    config = experiment.validate(experiment.load_file(str(path))[0])
+    config = _validated_race_file(tmp_path, f"{{{given}lr: 0.001}}")
     assert config.normalize_actions is expected and config.clip_actions is False
     assert race_ppo_config().normalize_actions is False
 
@@ -63,12 +68,7 @@ def test_race_envs_leave_out_per_step_terms_unless_the_file_asks(tmp_path: Path,
     """No Learner or callback reads the race's per-step reward terms and running metrics."""
     from rllib_asor.race.config import race_ppo_config
 
-    path = tmp_path / "x.yaml"
-    path.write_text(
-        "x:\n  env: game_env/ObstacleRace-v0\n  run: PPO\n  stop: {training_iteration: 2}\n"
-        f"  config: {{env_config: {{{given}map_id: 2}}}}\n"
-    )
-    config = experiment.validate(experiment.load_file(str(path))[0])
+    config = _validated_race_file(tmp_path, f"{{env_config: {{{given}map_id: 2}}}}")
     assert config.env_config == {"step_info": expected, "map_id": 2}
     assert race_ppo_config().env_config["step_info"] == "lean"
     full = race_ppo_config(env_config={"step_info": "full"})
