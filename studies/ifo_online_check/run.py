@@ -253,12 +253,14 @@ def garat_pi0(
     disc_steps: str = "5", disc_input: str = "s_next", grad_penalty: str = "1",
     disc_data: str = "rollouts", grad_penalty_form: str = "zero_centred", iterations: str = "30",
     target_g: str = "12", disc_norm: str = "target", schedule: str = "ours", batch: str = "2000",
+    gamma: str = "0.99",
 ) -> None:
     """Run 2 (run 3: `disc_steps` 50; run 4: 50, `disc_input` s_a_delta, `grad_penalty` 0;
     run 5: run 4 with `disc_data` deterministic; run 6: run 5 with `grad_penalty` 10 of form
     one_centred_mix and 80 iterations; run 7: run 5 with 80 iterations; run 8: run 5 with the
     target's gravity 20; run 9: run 5 with `disc_norm` round; run 10: run 5 with `schedule`
-    authors; run 11: run 5 with `batch` 5000): the grounding under a deterministic π₀
+    authors; run 11: run 5 with `batch` 5000; run 12: run 5 with the transformer's `gamma` 0):
+    the grounding under a deterministic π₀
     (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
@@ -283,6 +285,7 @@ def garat_pi0(
             grounding_iterations=int(iterations), grounding_batch_size=int(batch), seed=seed,
             disc_steps=int(disc_steps), disc_input=disc_input, grad_penalty=float(grad_penalty),
             disc_data=disc_data, grad_penalty_form=grad_penalty_form, disc_norm=disc_norm,
+            transformer_gamma=float(gamma),
             **AUTHORS_SCHEDULE if schedule == "authors" else {},
         )
         transformer, stats = ground("Pendulum-v1", SOURCE, settings, str(path), pendulum_pi0)
@@ -329,6 +332,8 @@ def garat_pi0(
             tag += f"_schedule{schedule}"
         if batch != "2000":
             tag += f"_batch{batch}"
+        if gamma != "0.99":
+            tag += f"_gamma{gamma}"
         print(f"GARAT pi0 ({disc_steps} D steps, {disc_input}, gp {grad_penalty}) seed {seed}: {row}")
         _save(f"{tag}/seed{seed}", row)
 

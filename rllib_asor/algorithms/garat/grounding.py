@@ -138,7 +138,7 @@ def _ground(
         .learners(num_learners=0)
         .training(
             lr=s.transformer_lr,
-            gamma=0.99,
+            gamma=s.transformer_gamma,
             train_batch_size=batch,
             minibatch_size=min(256, batch),
             num_epochs=s.transformer_epochs,

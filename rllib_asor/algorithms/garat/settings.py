@@ -63,6 +63,11 @@ class GaratSettings(BlockSettings):
     `train_garat.sh`)."""
     transformer_entropy_coeff: NonNegative = 0.0
     """PPO's entropy bonus for the transformer (`--ent_coeff 0.01` in `train_garat.sh`)."""
+    transformer_gamma: Annotated[float, Field(ge=0, le=1), Allowed("a number in [0, 1]")] = 0.99
+    """The transformer's PPO discount (GAE λ stays RLlib's 1.0; stable-baselines' PPO2 default
+    0.99 in the authors' runs). 0 makes each step's advantage its own reward less the value of
+    (s, a): D scores single transitions, and a return over the episode's later steps adds their
+    noise to every step's signal."""
     generator_iterations: IntAtLeast1 = 1
     """With `disc_data: deterministic`: the transformer's PPO iterations per discriminator
     update, D fixed in between (the authors train it for `--generator_epochs` × `--gsim_trans`

@@ -24,7 +24,10 @@ def test_several_generator_iterations_need_a_fixed_discriminator():
     defaults = GaratSettings()  # what every run before these settings did
     assert (defaults.generator_iterations, defaults.disc_warmup_iterations) == (1, 0)
     assert (defaults.transformer_epochs, defaults.transformer_clip_param) == (5, 0.3)
-    assert defaults.transformer_entropy_coeff == 0.0
+    assert (defaults.transformer_entropy_coeff, defaults.transformer_gamma) == (0.0, 0.99)
+    with pytest.raises(ValueError, match=r"garat.transformer_gamma=1.5 is not allowed; "
+                       r"expected a number in \[0, 1\]"):  # fmt: skip
+        GaratSettings(transformer_gamma=1.5)
 
 
 def test_warm_up_and_generator_iterations_schedule_the_two_players(tmp_path, monkeypatch):
@@ -48,11 +51,11 @@ def test_warm_up_and_generator_iterations_schedule_the_two_players(tmp_path, mon
     settings = GaratSettings(
         grounding_iterations=3, grounding_batch_size=32, disc_steps=1, disc_data="deterministic",
         disc_warmup_iterations=1, generator_iterations=2, transformer_epochs=1,
-        transformer_clip_param=0.1, transformer_entropy_coeff=0.01,
+        transformer_clip_param=0.1, transformer_entropy_coeff=0.01, transformer_gamma=0.0,
     )  # fmt: skip
     grounding.ground("Pendulum-v1", {}, settings, str(path))
     algo = algos[-1]
     assert algo.iteration == 3 * 2  # two PPO iterations per discriminator update
     assert len(d_steps) == 5 + 1 + 1  # 5 updates in the warm-up iteration, then 1 each
     assert (algo.config.num_epochs, algo.config.clip_param) == (1, 0.1)
-    assert algo.config.entropy_coeff == 0.01
+    assert (algo.config.entropy_coeff, algo.config.gamma) == (0.01, 0.0)
