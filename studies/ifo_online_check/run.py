@@ -253,13 +253,13 @@ def garat_pi0(
     disc_steps: str = "5", disc_input: str = "s_next", grad_penalty: str = "1",
     disc_data: str = "rollouts", grad_penalty_form: str = "zero_centred", iterations: str = "30",
     target_g: str = "12", disc_norm: str = "target", schedule: str = "ours", batch: str = "2000",
-    gamma: str = "0.99",
+    gamma: str = "0.99", init_std: str = "none",
 ) -> None:
     """Run 2 (run 3: `disc_steps` 50; run 4: 50, `disc_input` s_a_delta, `grad_penalty` 0;
     run 5: run 4 with `disc_data` deterministic; run 6: run 5 with `grad_penalty` 10 of form
     one_centred_mix and 80 iterations; run 7: run 5 with 80 iterations; run 8: run 5 with the
     target's gravity 20; run 9: run 5 with `disc_norm` round; run 10: run 5 with `schedule`
-    authors; run 11: run 5 with `batch` 5000; run 12: run 5 with the transformer's `gamma` 0):
+    authors; run 11: run 5 with `batch` 5000; run 12: run 5 with the transformer's `gamma` 0; run 13: run 12 with `init_std` 0.1):
     the grounding under a deterministic π₀
     (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
@@ -286,6 +286,7 @@ def garat_pi0(
             disc_steps=int(disc_steps), disc_input=disc_input, grad_penalty=float(grad_penalty),
             disc_data=disc_data, grad_penalty_form=grad_penalty_form, disc_norm=disc_norm,
             transformer_gamma=float(gamma),
+            transformer_init_std=None if init_std == "none" else float(init_std),
             **AUTHORS_SCHEDULE if schedule == "authors" else {},
         )
         transformer, stats = ground("Pendulum-v1", SOURCE, settings, str(path), pendulum_pi0)
@@ -334,9 +335,50 @@ def garat_pi0(
             tag += f"_batch{batch}"
         if gamma != "0.99":
             tag += f"_gamma{gamma}"
+        if init_std != "none":
+            tag += f"_std{init_std}"
         print(f"GARAT pi0 ({disc_steps} D steps, {disc_input}, gp {grad_penalty}) seed {seed}: {row}")
         _save(f"{tag}/seed{seed}", row)
 
 
+def oracle_gap(target_g: str = "12") -> None:
+    """The rule's floor: the one-step gap of garat_pi0's 2,000 target rows under the exact
+    correction Δ = (g_target − g_source)/2 · sin θ (Pendulum-v1: θ̇′ = θ̇ + (3g/2 · sin θ + 3u)·dt
+    with m = l = 1), clipped to the torque limit as the grounded env clips (README)."""
+    from rllib_asor.algorithms.common.demonstrations import load_demonstrations
+
+    g = float(target_g)
+    demos = load_demonstrations(
+        HERE / f"pendulum-g{target_g}-pi0.npz", gym.make("Pendulum-v1").observation_space
+    )
+    rows = np.random.default_rng(0).choice(len(demos), 2000, replace=False)
+    target = gym.make("Pendulum-v1", g=g).unwrapped
+    source = gym.make("Pendulum-v1", **SOURCE).unwrapped
+    for e in (target, source):
+        e.reset(seed=0)
+
+    def thdot_next(env, th: float, thdot: float, a: np.ndarray) -> float:
+        env.state = np.array([th, thdot])
+        return float(env.step(a)[0][2])
+
+    plain, oracle, saturated = [], [], 0
+    for obs in demos.obs[rows]:
+        th, thdot, a = float(np.arctan2(obs[1], obs[0])), float(obs[2]), pendulum_pi0(obs)
+        ref = thdot_next(target, th, thdot, a)
+        fixed = np.clip(a + (g - SOURCE["g"]) / 2 * np.sin(th), -2, 2).astype(np.float32)
+        plain.append(abs(thdot_next(source, th, thdot, a) - ref))
+        oracle.append(abs(thdot_next(source, th, thdot, fixed) - ref))
+        saturated += int(abs(a[0]) >= 2)
+    row = {
+        "plain_gap": float(np.mean(plain)),
+        "oracle_gap": float(np.mean(oracle)),
+        "ratio": float(np.mean(oracle) / np.mean(plain)),
+        "pi0_at_torque_limit": saturated / len(rows),
+    }
+    print(f"oracle (target g {target_g}): {row}")
+    _save("garat_pi0/oracle" + ("" if target_g == "12" else f"_g{target_g}"), row)
+
+
 if __name__ == "__main__":
-    {"gaifo": gaifo, "garat": garat, "garat_pi0": garat_pi0}[sys.argv[1]](*sys.argv[2:])
+    commands = {"gaifo": gaifo, "garat": garat, "garat_pi0": garat_pi0, "oracle_gap": oracle_gap}
+    commands[sys.argv[1]](*sys.argv[2:])

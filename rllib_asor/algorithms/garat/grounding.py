@@ -145,12 +145,19 @@ def _ground(
             clip_param=s.transformer_clip_param,
             entropy_coeff=s.transformer_entropy_coeff,
         )
-        .rl_module(model_config={"fcnet_hiddens": list(s.transformer_hiddens)})
+        .rl_module(
+            model_config={
+                "fcnet_hiddens": list(s.transformer_hiddens),
+                "free_log_std": s.transformer_init_std is not None,
+            }
+        )
         .gaifo(**gaifo_block(s, demonstrations, state_dims))
         .debugging(seed=s.seed)
         .reporting(metrics_num_episodes_for_smoothing=5)
     )
     algo = config.build_algo()
+    if s.transformer_init_std is not None:
+        set_initial_std(algo, s.transformer_init_std)
     grounding = GroundingEnv(grounding_config) if s.disc_data == "deterministic" else None
     try:
         stats: dict[str, float] = {}
@@ -172,6 +179,24 @@ def _ground(
         if grounding is not None:
             grounding.close()
     return saved, stats
+
+
+def set_initial_std(algo: Any, std: float) -> None:
+    """Set the transformer's free log σ (`free_log_std`) to log `std` on every Learner and
+    sync the env runners."""
+    import math
+
+    def fill(learner: Any) -> None:
+        import torch
+
+        with torch.no_grad():
+            for module in learner.module.values():
+                for name, p in module.named_parameters():
+                    if name.endswith("log_std"):
+                        p.fill_(math.log(std))
+
+    algo.learner_group.foreach_learner(fill)
+    algo.env_runner_group.sync_weights(from_worker_or_learner_group=algo.learner_group)
 
 
 def saved_transformer(algo: Any) -> SavedTransformer:

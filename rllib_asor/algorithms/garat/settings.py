@@ -68,6 +68,13 @@ class GaratSettings(BlockSettings):
     0.99 in the authors' runs). 0 makes each step's advantage its own reward less the value of
     (s, a): D scores single transitions, and a return over the episode's later steps adds their
     noise to every step's signal."""
+    transformer_init_std: Annotated[
+        float | None, Field(gt=0), Allowed("null or a number > 0")
+    ] = None
+    """None: RLlib's default policy head, whose network outputs log σ (σ ≈ 1 at the start);
+    a number: a state-independent log σ (stable-baselines' PPO2 `MlpPolicy`, the authors')
+    that starts at this σ. PPO moves the mean by a share of σ per iteration, so σ sets how
+    finely the transformer's Δ can settle."""
     generator_iterations: IntAtLeast1 = 1
     """With `disc_data: deterministic`: the transformer's PPO iterations per discriminator
     update, D fixed in between (the authors train it for `--generator_epochs` × `--gsim_trans`

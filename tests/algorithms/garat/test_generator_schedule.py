@@ -59,3 +59,25 @@ def test_warm_up_and_generator_iterations_schedule_the_two_players(tmp_path, mon
     assert len(d_steps) == 5 + 1 + 1  # 5 updates in the warm-up iteration, then 1 each
     assert (algo.config.num_epochs, algo.config.clip_param) == (1, 0.1)
     assert (algo.config.entropy_coeff, algo.config.gamma) == (0.01, 0.0)
+
+
+def test_transformer_init_std_starts_a_free_log_std_there(tmp_path):
+    with pytest.raises(ValueError, match=r"garat.transformer_init_std=0.0 is not allowed; "
+                       "expected null or a number > 0"):  # fmt: skip
+        GaratSettings(transformer_init_std=0.0)
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(40, 3)).astype(np.float32)
+    path = tmp_path / "target.npz"
+    save_demonstrations(path, Demonstrations.of(obs[:-1], obs[1:], [0] * 39, [False] * 39))
+    settings = GaratSettings(
+        grounding_iterations=1, grounding_batch_size=32, disc_steps=1, transformer_epochs=1,
+        transformer_init_std=0.1,
+    )  # fmt: skip
+    saved, _ = grounding.ground("Pendulum-v1", {}, settings, str(path))
+    (log_std,) = [v for k, v in saved.state.items() if k.endswith("log_std")]
+    # one PPO update (one epoch of 32 rows at lr 3e-4) moves it by far less than log 10
+    assert np.allclose(np.exp(log_std), 0.1, rtol=0.01)
+    default, _ = grounding.ground("Pendulum-v1", {}, GaratSettings(
+        grounding_iterations=1, grounding_batch_size=32, disc_steps=1, transformer_epochs=1,
+    ), str(path))  # fmt: skip
+    assert not any(k.endswith("log_std") for k in default.state)  # σ from the network
