@@ -13,6 +13,7 @@ the transformer (its module spec and weights) and the last statistics.
 
 from __future__ import annotations
 
+import math
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -184,7 +185,6 @@ def _ground(
 def set_initial_std(algo: Any, std: float) -> None:
     """Set the transformer's free log σ (`free_log_std`) to log `std` on every Learner and
     sync the env runners."""
-    import math
 
     def fill(learner: Any) -> None:
         import torch
