@@ -287,3 +287,22 @@ def test_every_proxy_kind_is_seeded_and_leaves_the_global_rng_alone(proxy):
     b = build()  # from another point of the global stream: the same weights
     for pa, pb in zip(a.parameters(), b.parameters(), strict=True):
         assert torch.equal(pa, pb)
+
+
+def test_only_a_flat_unmasked_batch_of_the_policys_own_rows_ranks_a_random_subset():
+    n, k = 8, 3
+    pb = {Columns.OBS: torch.zeros(n, 2), Columns.REWARDS: torch.zeros(n)}
+    rng = np.random.default_rng(0)
+    subset = connector._rank_subset(pb, n, None, None, k, rng)
+    assert subset is not None and subset.tolist() == sorted(set(subset.tolist()))
+    assert len(subset) == k and 0 <= int(subset.min()) and int(subset.max()) < n
+    # every row is ranked: a loss mask (padded sequences), an adapter's own ranked columns,
+    # no generator, no subset size, or a subset as large as the batch
+    for mask, ranked, rows, gen in [
+        (torch.ones(n), None, k, rng),
+        (None, lambda b: b, k, rng),
+        (None, None, k, None),
+        (None, None, None, rng),
+        (None, None, n, rng),
+    ]:
+        assert connector._rank_subset(pb, n, mask, ranked, rows, gen) is None
