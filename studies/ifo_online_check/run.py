@@ -259,9 +259,8 @@ def garat_pi0(
     run 5: run 4 with `disc_data` deterministic; run 6: run 5 with `grad_penalty` 10 of form
     one_centred_mix and 80 iterations; run 7: run 5 with 80 iterations; run 8: run 5 with the
     target's gravity 20; run 9: run 5 with `disc_norm` round; run 10: run 5 with `schedule`
-    authors; run 11: run 5 with `batch` 5000; run 12: run 5 with the transformer's `gamma` 0; run 13: run 12 with `init_std` 0.1):
-    the grounding under a deterministic π₀
-    (README.md)."""
+    authors; run 11: run 5 with `batch` 5000; run 12: run 5 with the transformer's `gamma` 0;
+    run 13: run 12 with `init_std` 0.1): the grounding under a deterministic π₀ (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
