@@ -53,7 +53,8 @@ def test_warm_up_and_generator_iterations_schedule_the_two_players(tmp_path, mon
         disc_warmup_iterations=1, generator_iterations=2, transformer_epochs=1,
         transformer_clip_param=0.1, transformer_entropy_coeff=0.01, transformer_gamma=0.0,
     )  # fmt: skip
-    grounding.ground("Pendulum-v1", {}, settings, str(path))
+    saved, _ = grounding.ground("Pendulum-v1", {}, settings, str(path))
+    assert not any(k.endswith("log_std") for k in saved.state)  # no init std: σ from the network
     algo = algos[-1]
     assert algo.iteration == 3 * 2  # two PPO iterations per discriminator update
     assert len(d_steps) == 5 + 1 + 1  # 5 updates in the warm-up iteration, then 1 each
@@ -77,7 +78,3 @@ def test_transformer_init_std_starts_a_free_log_std_there(tmp_path):
     (log_std,) = [v for k, v in saved.state.items() if k.endswith("log_std")]
     # one PPO update (one epoch of 32 rows at lr 3e-4) moves it by far less than log 10
     assert np.allclose(np.exp(log_std), 0.1, rtol=0.01)
-    default, _ = grounding.ground("Pendulum-v1", {}, GaratSettings(
-        grounding_iterations=1, grounding_batch_size=32, disc_steps=1, transformer_epochs=1,
-    ), str(path))  # fmt: skip
-    assert not any(k.endswith("log_std") for k in default.state)  # σ from the network
