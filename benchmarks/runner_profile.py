@@ -54,14 +54,12 @@ VARIANTS = {
     "async16": {"gym_env_vectorize_mode": "async", "num_envs_per_env_runner": 16},
     "eager": {"model_config": {"trace_inference": False}},
     "fullinfo": {"env_config": {"step_info": "full"}},
-    "rllib_unbatch": {"rllib_own": ("unbatch",)},
-    "envs32_rllib_batch": {"num_envs_per_env_runner": 32, "rllib_own": ("batch",)},
+    "rllib_unbatch": {"rllib_unbatch": True},
 }
 """Each variant's `env_runners(...)` settings; `model_config` updates race_net's settings and
 `env_config` the race env's (`fullinfo`: every step's info whole, as before `step_info`);
-`rllib_own` names RLlib functions sampled with RLlib's own version (our same-result one undone
-while it samples): `rllib_unbatch` (8 envs, `ray_compat.fast_unbatch`), `envs32_rllib_batch`
-(32 envs, `ray_compat.fast_batch`)."""
+`rllib_unbatch` samples with RLlib's own `unbatch` (`ray_compat.fast_unbatch` undone while it
+samples)."""
 WHATS = ("split", "profile", "rate", "size", "infos")
 
 
@@ -74,7 +72,7 @@ def build_runner(variant: str = "base", algo: str = "asor") -> Any:
     args = scaling.settle(scaling.build_parser().parse_args(["--runners", "1"]))
     config = scaling.race_config(algo, args, 0)
     settings = dict(VARIANTS[variant])
-    settings.pop("rllib_own", None)
+    settings.pop("rllib_unbatch", None)
     if "model_config" in settings:
         config = config.rl_module(
             model_config={**config.model_config, **settings.pop("model_config")}
@@ -305,27 +303,22 @@ def infos(steps: int, rounds: int, envs: int = 8) -> dict[str, list[float]]:
 
 
 @contextlib.contextmanager
-def rllib_own(names: tuple[str, ...]) -> Iterator[None]:
-    """While it runs, RLlib's per-step callers of each of `names` ("unbatch", "batch") use
-    RLlib's own function (`ray_compat._UNBATCH_USERS` / `_BATCH_USERS`), not ours."""
-    from ray.rllib.utils.spaces import space_utils
+def rllib_unbatch(on: bool) -> Iterator[None]:
+    """While on: the per-step callers of `unbatch` use RLlib's own (`ray_compat._UNBATCH_USERS`)."""
+    from ray.rllib.utils.spaces.space_utils import unbatch
 
     from rllib_asor import ray_compat
 
-    users = {"unbatch": ray_compat._UNBATCH_USERS, "batch": ray_compat._BATCH_USERS}
-    patches = [
-        (importlib.import_module(m), attr, getattr(space_utils, name))
-        for name in names
-        for m, attr in users[name]
-    ]
-    saved = [getattr(m, attr) for m, attr, _ in patches]
+    modules = [(importlib.import_module(m), name) for m, name in ray_compat._UNBATCH_USERS]
+    saved = [getattr(m, name) for m, name in modules]
     try:
-        for m, attr, theirs in patches:
-            setattr(m, attr, theirs)
+        if on:
+            for m, name in modules:
+                setattr(m, name, unbatch)
         yield
     finally:
-        for (m, attr, _), fn in zip(patches, saved, strict=True):
-            setattr(m, attr, fn)
+        for (m, name), fn in zip(modules, saved, strict=True):
+            setattr(m, name, fn)
 
 
 def rate(variants: list[str], steps: int, rounds: int) -> dict[str, Any]:
@@ -339,7 +332,7 @@ def rate(variants: list[str], steps: int, rounds: int) -> dict[str, Any]:
         for _ in range(rounds):
             for v, r in runners.items():
                 t0, c0 = time.perf_counter(), time.process_time()
-                with rllib_own(VARIANTS[v].get("rllib_own", ())):
+                with rllib_unbatch(VARIANTS[v].get("rllib_unbatch", False)):
                     n = sample_n(r, steps)
                 rows[v]["wall"].append(n / (time.perf_counter() - t0))
                 rows[v]["cpu"].append(n / max(time.process_time() - c0, 1e-9))

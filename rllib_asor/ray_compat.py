@@ -23,8 +23,8 @@ inside each function: importing this module costs nothing.
 
 `fast_rllib()` is the one place that replaces names inside RLlib's modules, each with a function
 that gives RLlib's result faster (the `inspect` of its connector module, its per-step
-`unbatch` and `batch`); our Learners' module and the RLlib glue call it on import, so every
-process that builds our Algorithms has it (docs/speed.md).
+`unbatch`); our Learners' module and the RLlib glue call it on import, so every process that
+builds our Algorithms has it (docs/speed.md).
 """
 
 from __future__ import annotations
@@ -344,70 +344,10 @@ def fast_unbatch() -> None:
             setattr(module, name, _unbatch)
 
 
-def _batch(list_of_structs: list[Any], *, individual_items_already_have_batch_dim: Any = False) -> Any:
-    """RLlib's `space_utils.batch` (one struct per row → a struct of batches), without dm-tree
-    for a list of plain dicts of numpy arrays, all with the first one's keys: each key's rows
-    stacked as RLlib's `fast_stack` stacks them, the keys in the first dict's order (as
-    `map_structure`). Anything else, and rows already batched, go to RLlib's."""
-    import numpy as np
-
-    first = list_of_structs[0] if list_of_structs else None
-    if (
-        type(first) is dict
-        and first
-        and individual_items_already_have_batch_dim in (False, "auto")
-        and all(
-            type(row) is dict
-            and row.keys() == first.keys()
-            and all(type(v) is np.ndarray for v in row.values())
-            for row in list_of_structs
-        )
-        and all(type(k) is str for k in first)
-    ):
-        n = len(list_of_structs)
-        out = {}
-        for key, v0 in first.items():
-            stacked = np.empty((n, *v0.shape), dtype=v0.dtype)
-            for i, row in enumerate(list_of_structs):
-                stacked[i] = row[key]
-            out[key] = stacked
-        return out
-    from ray.rllib.utils.spaces.space_utils import batch
-
-    return batch(
-        list_of_structs,
-        individual_items_already_have_batch_dim=individual_items_already_have_batch_dim,
-    )
-
-
-_BATCH_USERS = (
-    ("ray.rllib.env.utils.infinite_lookback_buffer", "batch"),
-    ("ray.rllib.connectors.common.batch_individual_items", "batch_fn"),
-)
-"""Where RLlib batches per env step (env-to-module) or per episode chunk (`to_numpy`)."""
-
-
-def fast_batch() -> None:
-    """Make RLlib's batching of dict observations cheap, with the same result (idempotent).
-
-    The env-to-module pipeline batches the envs' observation dicts once per env step, and
-    every episode chunk's `to_numpy` its list of them; RLlib's `batch` maps dm-tree over the
-    rows (about a twentieth of a 32-env race runner's time under cProfile). Each caller's
-    module gets `_batch` instead."""
-    from ray.rllib.utils.spaces.space_utils import batch
-
-    for module_name, name in _BATCH_USERS:
-        module = importlib.import_module(module_name)
-        if getattr(module, name, None) is batch:  # not yet replaced; RLlib's own function
-            setattr(module, name, _batch)
-
-
 def fast_rllib() -> None:
-    """RLlib's same-result speed-ups for this process: `fast_connector_init`, `fast_unbatch`,
-    `fast_batch`."""
+    """RLlib's same-result speed-ups for this process: `fast_connector_init`, `fast_unbatch`."""
     fast_connector_init()
     fast_unbatch()
-    fast_batch()
 
 
 # -- The check ---------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """RLlib's same-result speed-ups (`ray_compat.fast_rllib`): connectors built without reading
 source files, with the same recorded constructor arguments (what a checkpoint restores them
-from); per-step unbatching and batching without dm-tree where there is nothing to unflatten or
-nest, with the same rows and batches."""
+from); per-step unbatching without dm-tree where there is nothing to unflatten, with the same
+rows."""
 
 from __future__ import annotations
 
@@ -10,14 +10,12 @@ import inspect
 import gymnasium as gym
 import numpy as np
 import pytest
-import ray.rllib.connectors.common.batch_individual_items as batch_connector
 import ray.rllib.connectors.connector_v2 as connector_v2
 import ray.rllib.connectors.module_to_env.unbatch_to_individual_items as unbatch_connector
 import ray.rllib.env.single_agent_env_runner as single_agent_env_runner
-import ray.rllib.env.utils.infinite_lookback_buffer as lookback_buffer
 import torch
 from ray.rllib.connectors.connector_v2 import ConnectorV2
-from ray.rllib.utils.spaces.space_utils import BatchedNdArray, batch, unbatch
+from ray.rllib.utils.spaces.space_utils import unbatch
 
 from rllib_asor import ray_compat
 
@@ -88,58 +86,3 @@ def test_the_per_step_callers_unbatch_with_it() -> None:
     assert unbatch_connector.unbatch_fn is ray_compat._unbatch
     ray_compat.fast_rllib()  # again: nothing changes
     assert single_agent_env_runner.unbatch is ray_compat._unbatch
-
-
-def _obs(rng: np.random.Generator, order: str = "za") -> dict:
-    parts = {"z": rng.normal(size=(2, 3)).astype(np.float32), "a": rng.integers(0, 4, (5,))}
-    return {k: parts[k] for k in order}
-
-
-ROWS = {
-    "obs dicts, keys unsorted": [_obs(RNG) for _ in range(4)],
-    "one obs dict": [_obs(RNG)],
-    "keys in another order per row": [_obs(RNG, "za"), _obs(RNG, "az")],
-    "a float64 row among float32 rows": [_obs(RNG), {**_obs(RNG), "z": np.ones((2, 3))}],
-    "nested dicts": [{"a": {"b": np.arange(3)}, "c": np.arange(2.0)} for _ in range(3)],
-    "tuples": [(np.arange(3), np.ones(2)) for _ in range(3)],
-    "arrays": [np.arange(3) for _ in range(3)],
-    "scalars": [1.0, 2.0, 3.0],
-    "already batched": [{"a": BatchedNdArray(np.ones((2, 3)))} for _ in range(2)],
-}
-
-
-@pytest.mark.parametrize("name", sorted(ROWS))
-def test_batch_gives_rllibs_batch(name: str) -> None:
-    rows = ROWS[name]
-    for already in (False, "auto"):
-        ours = ray_compat._batch(rows, individual_items_already_have_batch_dim=already)
-        theirs = batch(rows, individual_items_already_have_batch_dim=already)
-        assert _same(ours, theirs)
-        leaves = ours.values() if isinstance(ours, dict) else [ours]
-        assert [v.dtype for v in leaves if isinstance(v, np.ndarray)] == [
-            v.dtype for v in (theirs.values() if isinstance(theirs, dict) else [theirs])
-            if isinstance(v, np.ndarray)
-        ]
-
-
-@pytest.mark.parametrize(
-    "rows",
-    [
-        [{"a": np.ones(2)}, {"b": np.ones(2)}],  # other keys
-        [{"a": np.ones(2)}, {"a": [1.0, 1.0]}],  # a list where the first row has an array
-    ],
-    ids=["other keys", "list leaf"],
-)
-def test_batch_refuses_what_rllib_refuses(rows: list) -> None:
-    with pytest.raises(Exception) as theirs:
-        batch(rows)
-    with pytest.raises(type(theirs.value)):
-        ray_compat._batch(rows)
-
-
-def test_an_episode_chunk_and_the_env_to_module_pipeline_batch_with_it() -> None:
-    ray_compat.fast_rllib()
-    assert lookback_buffer.batch is ray_compat._batch
-    assert batch_connector.batch_fn is ray_compat._batch
-    ray_compat.fast_rllib()  # again: nothing changes
-    assert lookback_buffer.batch is ray_compat._batch
