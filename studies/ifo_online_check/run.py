@@ -237,6 +237,24 @@ AUTHORS_SCHEDULE = {
 """Run 10: the authors' schedule of the two players, scaled to 30 grounding iterations (README)."""
 
 
+def target_pendulum(target_g: str, gain: float = 1.0, limit: bool = False) -> gym.Env:
+    """The target Pendulum: gravity `target_g`, its torques scaled by `gain` before Pendulum
+    clips them (run 14); with `limit`, in Pendulum-v1's 200-step time limit, else bare (the
+    gap loops set its state). Gain 1: `gym.make("Pendulum-v1", g=...)` as runs 1-13."""
+    from gymnasium.envs.classic_control.pendulum import PendulumEnv
+
+    if gain == 1:
+        env = gym.make("Pendulum-v1", g=float(target_g))
+        return env if limit else env.unwrapped
+
+    class GainPendulum(PendulumEnv):
+        def step(self, u):
+            return super().step(np.asarray(u, np.float32) * np.float32(gain))
+
+    env = GainPendulum(g=float(target_g))
+    return gym.wrappers.TimeLimit(env, 200) if limit else env
+
+
 def _returns(env, act, episodes: int = 20) -> float:
     rets = []
     for i in range(episodes):
@@ -253,27 +271,29 @@ def garat_pi0(
     disc_steps: str = "5", disc_input: str = "s_next", grad_penalty: str = "1",
     disc_data: str = "rollouts", grad_penalty_form: str = "zero_centred", iterations: str = "30",
     target_g: str = "12", disc_norm: str = "target", schedule: str = "ours", batch: str = "2000",
-    gamma: str = "0.99", init_std: str = "none",
+    gamma: str = "0.99", init_std: str = "none", target_gain: str = "1",
 ) -> None:
     """Run 2 (run 3: `disc_steps` 50; run 4: 50, `disc_input` s_a_delta, `grad_penalty` 0;
     run 5: run 4 with `disc_data` deterministic; run 6: run 5 with `grad_penalty` 10 of form
     one_centred_mix and 80 iterations; run 7: run 5 with 80 iterations; run 8: run 5 with the
     target's gravity 20; run 9: run 5 with `disc_norm` round; run 10: run 5 with `schedule`
     authors; run 11: run 5 with `batch` 5000; run 12: run 5 with the transformer's `gamma` 0;
-    run 13: run 12 with `init_std` 0.1): the grounding under a deterministic π₀ (README.md)."""
+    run 13: run 12 with `init_std` 0.1; run 14: run 5 with the target's gravity 10 and its
+    torques scaled by `target_gain` 0.8): the grounding under a deterministic π₀ (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
     from rllib_asor.algorithms.garat.settings import GaratSettings
 
-    target_kwargs = {"g": float(target_g)}
-    path = HERE / f"pendulum-g{target_g}-pi0.npz"
+    gain = float(target_gain)
+    shift = ("" if target_g == "12" else f"_g{target_g}") + ("" if gain == 1 else f"_gain{target_gain}")
+    path = HERE / f"pendulum-g{target_g}{'' if gain == 1 else f'-gain{target_gain}'}-pi0.npz"
     save_demonstrations(
-        path, rollout_demonstrations(pendulum_pi0, "Pendulum-v1", 20, env_kwargs=target_kwargs)
+        path, rollout_demonstrations(pendulum_pi0, target_pendulum(target_g, gain, limit=True), 20)
     )
     demos = load_demonstrations(path, gym.make("Pendulum-v1").observation_space)
-    _save("garat_pi0/pi0" + ("" if target_g == "12" else f"_g{target_g}"), {
-        "target": _returns(gym.make("Pendulum-v1", **target_kwargs), pendulum_pi0),
+    _save("garat_pi0/pi0" + shift, {
+        "target": _returns(target_pendulum(target_g, gain, limit=True), pendulum_pi0),
         "source": _returns(gym.make("Pendulum-v1", **SOURCE), pendulum_pi0),
     })
     rng = np.random.default_rng(0)
@@ -289,7 +309,7 @@ def garat_pi0(
             **AUTHORS_SCHEDULE if schedule == "authors" else {},
         )
         transformer, stats = ground("Pendulum-v1", SOURCE, settings, str(path), pendulum_pi0)
-        target = gym.make("Pendulum-v1", **target_kwargs).unwrapped
+        target = target_pendulum(target_g, gain)
         source = gym.make("Pendulum-v1", **SOURCE).unwrapped
         cfg = {"env": "Pendulum-v1", "env_config": SOURCE, "transformer": transformer}
         grounded = GroundedEnv(cfg)
@@ -336,6 +356,8 @@ def garat_pi0(
             tag += f"_gamma{gamma}"
         if init_std != "none":
             tag += f"_std{init_std}"
+        if gain != 1:
+            tag += f"_gain{target_gain}"
         print(f"GARAT pi0 ({disc_steps} D steps, {disc_input}, gp {grad_penalty}) seed {seed}: {row}")
         _save(f"{tag}/seed{seed}", row)
 
