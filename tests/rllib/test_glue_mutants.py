@@ -297,12 +297,18 @@ def test_only_a_flat_unmasked_batch_of_the_policys_own_rows_ranks_a_random_subse
     assert subset is not None and subset.tolist() == sorted(set(subset.tolist()))
     assert len(subset) == k and 0 <= int(subset.min()) and int(subset.max()) < n
     # every row is ranked: a loss mask (padded sequences), an adapter's own ranked columns,
-    # no generator, no subset size, or a subset as large as the batch
+    # no generator, no subset size, a subset as large as the batch, or an empty one
     for mask, ranked, rows, gen in [
         (torch.ones(n), None, k, rng),
         (None, lambda b: b, k, rng),
         (None, None, k, None),
         (None, None, None, rng),
         (None, None, n, rng),
+        (None, None, 0, rng),
     ]:
         assert connector._rank_subset(pb, n, mask, ranked, rows, gen) is None
+    # a column that is not one row per transition: every row is ranked
+    assert connector._rank_subset({**pb, "x": torch.zeros(2 * n)}, n, None, None, k, rng) is None
+    # the subset lives on the batch's device (CI has no GPU: torch's "meta" device stands in)
+    meta = {key: v.to("meta") for key, v in pb.items()}
+    assert connector._rank_subset(meta, n, None, None, k, rng).device.type == "meta"
