@@ -287,8 +287,8 @@ def garat_pi0(
     authors; run 11: run 5 with `batch` 5000; run 12: run 5 with the transformer's `gamma` 0;
     run 13: run 12 with `init_std` 0.1; run 14: run 5 with the target's gravity 10 and its
     torques scaled by `target_gain` 0.8; run 15: run 14 with `behaviour` swing and
-    `target_gain` 0.5): the grounding
-    under a deterministic behaviour policy, π₀ or `pendulum_swing` (README.md)."""
+    `target_gain` 0.5): the grounding under a deterministic behaviour policy, π₀ or
+    `pendulum_swing` (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
