@@ -249,6 +249,9 @@ def test_aux_modules_take_one_minibatch_per_call_unless_aux_epochs_is_set(monkey
     update(learner, transitions(96))
     assert learner.config.learner_config_dict[MINIBATCH_KEY] == 32
     assert rows["rows"] == 2 * 32  # one minibatch each (discriminator, proxy), of 3 SAC steps
+    rows["rows"] = 0
+    update(learner, transitions(16))
+    assert rows["rows"] == 2 * 32  # a minibatch's rows each, also from a call of fewer rows
 
     learner = sac_learner(aux_epochs=2)
     rows["rows"] = 0
