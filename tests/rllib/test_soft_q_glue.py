@@ -259,6 +259,17 @@ def test_aux_modules_take_one_minibatch_per_call_unless_aux_epochs_is_set(monkey
     assert rows["rows"] == 2 * 2 * 96  # two passes each over the call's 96 rows
 
 
+def test_the_fast_path_trains_the_ensemble_proxy_on_the_ranked_rows():
+    """With more rows than a minibatch only a random subset is ranked; the ensemble proxy
+    still gets those rows' actions and next states, and trains on them."""
+    learner = sac_learner(proxy="ensemble")
+    proxy = learner.module[DISC].unwrapped().trainer.proxy
+    before = params(proxy)
+    update(learner, transitions(96))
+    after = params(proxy)
+    assert any(not torch.equal(before[k], after[k]) for k in before)
+
+
 def test_soft_q_state_values_is_the_twin_minimum_at_the_squashed_mean():
     module = sac_learner().module[DEFAULT_MODULE_ID].unwrapped()
     obs = torch.randn(5, 3)
