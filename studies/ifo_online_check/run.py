@@ -385,7 +385,7 @@ def oracle_gap(target_g: str = "12") -> None:
         HERE / f"pendulum-g{target_g}-pi0.npz", gym.make("Pendulum-v1").observation_space
     )
     rows = np.random.default_rng(0).choice(len(demos), 2000, replace=False)
-    target = gym.make("Pendulum-v1", g=g).unwrapped
+    target = target_pendulum(target_g)
     source = gym.make("Pendulum-v1", **SOURCE).unwrapped
     for e in (target, source):
         e.reset(seed=0)
