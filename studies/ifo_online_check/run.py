@@ -279,6 +279,7 @@ def garat_pi0(
     disc_data: str = "rollouts", grad_penalty_form: str = "zero_centred", iterations: str = "30",
     target_g: str = "12", disc_norm: str = "target", schedule: str = "ours", batch: str = "2000",
     gamma: str = "0.99", init_std: str = "none", target_gain: str = "1", behaviour: str = "pi0",
+    seeds: str = "0,1",
 ) -> None:
     """Run 2 (run 3: `disc_steps` 50; run 4: 50, `disc_input` s_a_delta, `grad_penalty` 0;
     run 5: run 4 with `disc_data` deterministic; run 6: run 5 with `grad_penalty` 10 of form
@@ -287,8 +288,8 @@ def garat_pi0(
     authors; run 11: run 5 with `batch` 5000; run 12: run 5 with the transformer's `gamma` 0;
     run 13: run 12 with `init_std` 0.1; run 14: run 5 with the target's gravity 10 and its
     torques scaled by `target_gain` 0.8; run 15: run 14 with `behaviour` swing and
-    `target_gain` 0.5): the grounding under a deterministic behaviour policy, π₀ or
-    `pendulum_swing` (README.md)."""
+    `target_gain` 0.5; run 16: run 15 on `seeds` 2,3): the grounding under a deterministic
+    behaviour policy, π₀ or `pendulum_swing` (README.md)."""
     from rllib_asor.algorithms.common.demonstrations import load_demonstrations
     from rllib_asor.algorithms.garat.envs import GroundedEnv
     from rllib_asor.algorithms.garat.grounding import ground
@@ -308,7 +309,7 @@ def garat_pi0(
     })
     rng = np.random.default_rng(0)
     rows = rng.choice(len(demos), 2000, replace=False)
-    for seed in SEEDS:
+    for seed in (int(x) for x in seeds.split(",")):
         t0 = time.time()
         settings = GaratSettings(
             grounding_iterations=int(iterations), grounding_batch_size=int(batch), seed=seed,
