@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The GPU check (docs/cluster.md, "Running on GPUs"): on a machine with the project installed
 # (`make install`, or the offline kit: `source .gpu/install.sh`), run the `gpu`-marked tests and
-# the race scaling benchmark, then print one summary table. About 9 minutes on an H200, at most
+# the race scaling benchmark, then print one summary table. About 8 minutes on an H200, at most
 # about 13: every step runs under `timeout`. On a machine without CUDA the tests skip and the
 # benchmark runs --quick on the CPU. Steps that cannot run here (no pytest, Ray cannot start)
 # print one line and the rest goes on. Usage:  scripts/gpu_check.sh   or   make gpu-check
@@ -9,7 +9,8 @@
 # GPU_CHECK_BENCH_S (160; 420 without CUDA), GPU_CHECK_LEARNER_S (60; 120 without CUDA),
 # GPU_CHECK_OVERLAP_S (100; 300 without CUDA), GPU_CHECK_ENVS32_S (60; 200 without CUDA),
 # GPU_CHECK_SPLIT_S (120; 420 without CUDA): a limit of 0 skips its step.
-# GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without).
+# GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without). GPU_CHECK_TEST_WORKERS (6 on a GPU, where
+# pytest-xdist is installed; 0 runs the tests one by one).
 set -u
 cd "$(dirname "$0")/.."
 out=${GPU_CHECK_OUT:-benchmarks/out/gpu_check}
@@ -29,13 +30,13 @@ fi
 cuda=$("$py" -c "import torch; print(int(torch.cuda.is_available()))")
 if [ "$cuda" = 1 ]; then
   device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=160; learner_s=60; overlap_s=100
-  envs32_s=60; split_s=120
+  envs32_s=60; split_s=120; test_workers=6
 else  # a CPU machine checks the script itself: slower, so longer limits
   device=cpu; runners=${GPU_CHECK_RUNNERS:-1,2}; bench_s=420; learner_s=120; overlap_s=300
-  envs32_s=200; split_s=420
+  envs32_s=200; split_s=420; test_workers=0
   echo "gpu-check: torch sees no CUDA device: the gpu tests skip, the benchmark runs on the CPU"
 fi
-test_s=${GPU_CHECK_TEST_S:-240}; bench_s=${GPU_CHECK_BENCH_S:-$bench_s}
+test_s=${GPU_CHECK_TEST_S:-240}; test_workers=${GPU_CHECK_TEST_WORKERS:-$test_workers}; bench_s=${GPU_CHECK_BENCH_S:-$bench_s}
 learner_s=${GPU_CHECK_LEARNER_S:-$learner_s}; split_s=${GPU_CHECK_SPLIT_S:-$split_s}
 overlap_s=${GPU_CHECK_OVERLAP_S:-$overlap_s}; envs32_s=${GPU_CHECK_ENVS32_S:-$envs32_s}
 skip() { [ "$1" = 0 ] && echo "gpu-check: skipped $2 (its limit is 0)"; }
@@ -55,9 +56,15 @@ bench() {
 if skip "$test_s" "the gpu tests"; then :
 elif "$py" -c "import pytest" 2>/dev/null; then
   files=$(grep -rl --include='*.py' "pytest.mark.gpu" tests | sort)
-  echo "gpu-check: pytest -m gpu on $(echo $files | wc -w) files (at most $test_s s)"
+  # With pytest-xdist the tests run $test_workers at a time: each is a small training run that
+  # waits on Ray and RLlib start-ups, not on the GPU, so a 16-core node runs them side by side.
+  workers=""
+  if [ "$test_workers" != 0 ] && "$py" -c "import xdist" 2>/dev/null; then
+    workers="-n $test_workers --dist load"
+  fi
+  echo "gpu-check: pytest -m gpu on $(echo $files | wc -w) files ${workers:+($workers) }(at most $test_s s)"
   # shellcheck disable=SC2086
-  timeout -k 10 "$test_s" "$py" -m pytest -m gpu -q -p no:randomly $files \
+  timeout -k 10 "$test_s" "$py" -m pytest -m gpu -q -p no:randomly $workers $files \
     --junitxml="$out/gpu_tests.xml" > "$out/gpu_tests.log" 2>&1
   echo "gpu-check: tests exit $? (log: $out/gpu_tests.log)"
   tail -n 3 "$out/gpu_tests.log"
