@@ -92,6 +92,8 @@ def targets(
              sample_many, 30_000.0],
             ["Learner alone, best (env steps/s)", fmt(best), "≥ 10,000", best, 10_000.0],
         ]  # fmt: skip
+        if lo == hi:  # one runner count: no ratio between counts, no fewest-runner row
+            del rows[3:5]
     over = sorted({r["runners"] for r in (overlap or {}).get("rows", [])})
     if over:
         n = over[-1]

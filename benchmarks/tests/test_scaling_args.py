@@ -75,6 +75,15 @@ def test_targets_are_judged_on_cuda_only() -> None:
     assert {r[3] for r in rows} == {"not judged (CPU)"}
 
 
+def test_one_runner_count_shows_no_ratio_of_runner_counts() -> None:
+    data = scaling_json("cuda", {("ppo", 14): 6_000.0, ("asor", 14): 5_900.0}, 14_000.0)
+    for row in data["rows"]:
+        row["sample"] = 12_000.0
+    checks = [r[0] for r in summary.targets(data, None)]
+    assert "sampling only, 14 runners (env steps/s)" in checks
+    assert not any("÷ 14 runners" in c or "runner(s)" in c for c in checks), checks
+
+
 def test_overlapped_end_to_end_is_judged_beside_the_synchronous_one() -> None:
     sync = scaling_json("cuda", {("ppo", 1): 700.0, ("asor", 1): 800.0, ("ppo", 14): 5_000.0,
                                  ("asor", 14): 4_900.0}, 15_000.0)  # fmt: skip
