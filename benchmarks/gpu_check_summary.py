@@ -178,6 +178,14 @@ def main(argv: list[str] | None = None) -> int:
             lines.append(split_table(part))
         if "sync" in split:
             lines.append(sync_table(split["sync"]))
+    runner = load(out / "runner" / "runner_profile.json")
+    if runner is None or "split" not in runner:
+        lines.append("\none runner's split: no result (see runner.log)")
+    else:
+        from benchmarks.runner_profile import split_table as runner_table
+
+        lines.append(f"\nwhere one env runner's time goes ({runner.get('cpus')} CPUs, no Ray):")
+        lines.append(runner_table(runner["split"]))
     print("\n".join(lines))
     return 0
 

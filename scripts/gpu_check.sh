@@ -8,14 +8,16 @@
 # Knobs: GPU_CHECK_OUT (default benchmarks/out/gpu_check), GPU_CHECK_TEST_S (240),
 # GPU_CHECK_BENCH_S (160; 420 without CUDA), GPU_CHECK_LEARNER_S (60; 120 without CUDA),
 # GPU_CHECK_OVERLAP_S (100; 300 without CUDA), GPU_CHECK_ENVS32_S (60; 200 without CUDA),
-# GPU_CHECK_SPLIT_S (120; 420 without CUDA): a limit of 0 skips its step.
+# GPU_CHECK_SPLIT_S (120; 420 without CUDA), GPU_CHECK_RUNNER_S (60; 120 without CUDA): a limit
+# of 0 skips its step.
 # GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without). GPU_CHECK_TEST_WORKERS (6 on a GPU, where
 # pytest-xdist is installed; 0 runs the tests one by one).
 set -u
 cd "$(dirname "$0")/.."
 out=${GPU_CHECK_OUT:-benchmarks/out/gpu_check}
 mkdir -p "$out"
-rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/e2e "$out"/overlap "$out"/envs32 "$out"/split
+rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/e2e "$out"/overlap "$out"/envs32 "$out"/split \
+  "$out"/runner
 if [ -x .venv/bin/python ]; then py=${PYTHON:-.venv/bin/python}; else py=${PYTHON:-python3}; fi
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} RAY_memory_monitor_refresh_ms=0 \
   RAY_DISABLE_DOCKER_CPU_WARNING=1 RAY_USAGE_STATS_ENABLED=0 PYTHONUNBUFFERED=1
@@ -30,15 +32,16 @@ fi
 cuda=$("$py" -c "import torch; print(int(torch.cuda.is_available()))")
 if [ "$cuda" = 1 ]; then
   device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=160; learner_s=60; overlap_s=100
-  envs32_s=60; split_s=120; test_workers=6
+  envs32_s=60; split_s=120; runner_s=60; test_workers=6
 else  # a CPU machine checks the script itself: slower, so longer limits
   device=cpu; runners=${GPU_CHECK_RUNNERS:-1,2}; bench_s=420; learner_s=120; overlap_s=300
-  envs32_s=200; split_s=420; test_workers=0
+  envs32_s=200; split_s=420; runner_s=120; test_workers=0
   echo "gpu-check: torch sees no CUDA device: the gpu tests skip, the benchmark runs on the CPU"
 fi
 test_s=${GPU_CHECK_TEST_S:-240}; test_workers=${GPU_CHECK_TEST_WORKERS:-$test_workers}; bench_s=${GPU_CHECK_BENCH_S:-$bench_s}
 learner_s=${GPU_CHECK_LEARNER_S:-$learner_s}; split_s=${GPU_CHECK_SPLIT_S:-$split_s}
 overlap_s=${GPU_CHECK_OVERLAP_S:-$overlap_s}; envs32_s=${GPU_CHECK_ENVS32_S:-$envs32_s}
+runner_s=${GPU_CHECK_RUNNER_S:-$runner_s}
 skip() { [ "$1" = 0 ] && echo "gpu-check: skipped $2 (its limit is 0)"; }
 # bench NAME LIMIT WHAT ARGS...: `benchmarks.scaling --quick ARGS` under LIMIT seconds into
 # $out/NAME (its scaling.json) and $out/NAME.log; a LIMIT of 0 skips it.
@@ -97,5 +100,14 @@ bench envs32 "$envs32_s" "sampling with 32 envs per runner" --runners "$runners"
 bench split "$split_s" "the split" --runners "$last" --sync-runners "$last" --parts split,sync \
   --minibatch 2048
 
-# 5. One table.
+# 5. Where one env runner's time goes on this machine (built in this process, no Ray): the
+#    physics against race_net's forward, RLlib's connectors and loop, the env's own Python.
+if ! skip "$runner_s" "one runner's split"; then
+  echo "gpu-check: one runner's split: benchmarks.runner_profile --what split (at most $runner_s s)"
+  timeout -k 10 "$runner_s" "$py" -m benchmarks.runner_profile --what split --steps 1024 \
+    --out "$out/runner" > "$out/runner.log" 2>&1
+  echo "gpu-check: runner split exit $? (log: $out/runner.log)"
+fi
+
+# 6. One table.
 "$py" -m benchmarks.gpu_check_summary "$out"

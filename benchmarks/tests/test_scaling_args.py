@@ -136,6 +136,7 @@ def test_summary_says_what_is_missing(tmp_path: Path, capsys: pytest.CaptureFixt
     out = capsys.readouterr().out
     assert "| scaling benchmark, Learner alone | no result (see its log) |" in out
     assert "| PPO+ASOR, 1 runner(s) (env steps/s) | e2e 250; learner 500 |" in out
+    assert "one runner's split: no result (see runner.log)" in out
 
 
 def test_gpu_check_script_parses() -> None:
