@@ -10,8 +10,9 @@ once as the node's CPUs and GPUs allow (a scale run needs 16 CPUs and the GPU).
     python studies/race_scale/run.py --seeds 20 --steps 500000 --out studies/race_scale
     python studies/race_scale/run.py --seeds 1 --steps 2048 --layout cpu --out /tmp/race_scale  # smoke
 
-`--layout cpu` (smoke tests only, recorded in each run file and never mixed with `asis`):
-the Learner on the CPU, sampling in the run's process with the YAML's total number of envs.
+`--layout cpu` (the study's layout since its amendment, README.md; recorded in each run file and
+never mixed with `asis`): the Learner on the CPU, sampling in the run's process with the YAML's
+total number of envs (the same rollouts, batch, minibatch and epochs), one CPU per run.
 """
 
 from __future__ import annotations
