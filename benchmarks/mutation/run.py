@@ -17,6 +17,10 @@ Then the kill ratio is computed:
 with the equivalent mutants listed, each with its reason, in equivalent.toml. The summary goes
 to stdout and to build/mutation/<package>.json. The exit status is 1 when a package is below
 its threshold or a survivor is neither killed nor listed as equivalent (and --check is given).
+
+The verdicts are also kept in benchmarks/mutation/verdicts/<package>.json (verdicts.py), written
+every few minutes during a run and at its end: commit it, and a fresh checkout's run starts
+from those verdicts instead of from zero (mutmut re-tests the mutants of changed functions).
 """
 
 from __future__ import annotations
@@ -32,6 +36,8 @@ import sys
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
+
+from benchmarks.mutation import verdicts
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -147,7 +153,10 @@ def write_config(dest: Path, defaults: dict, pkg: dict) -> None:
         path.write_text(text)
 
 
-def run_mutmut(dest: Path, children: int, names: list[str], nice: int = 19) -> int:
+def run_mutmut(
+    dest: Path, children: int, names: list[str], nice: int = 19, package: str = "",
+    save_every_s: float = 300.0,
+) -> int:  # fmt: skip
     mutmut = Path(sys.executable).with_name("mutmut")
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONHASHSEED="0")
     cmd = ["nice", "-n", str(nice), str(mutmut), "run", "--max-children", str(children), *names]
@@ -158,7 +167,13 @@ def run_mutmut(dest: Path, children: int, names: list[str], nice: int = 19) -> i
         f"(in {dest})",
         flush=True,
     )
-    return subprocess.run(cmd, cwd=dest, env=env).returncode
+    with subprocess.Popen(cmd, cwd=dest, env=env) as proc:
+        while True:
+            try:
+                return proc.wait(timeout=save_every_s)
+            except subprocess.TimeoutExpired:  # a session may end mid-run: keep what is done
+                if package:
+                    verdicts.save(package, dest)
 
 
 def summarise(name: str, dest: Path, pkg: dict, equivalent: dict[str, str]) -> dict:
@@ -262,6 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     summaries = []
     for name in names:
         pkg, dest = packages[name], BUILD / name
+        restored = verdicts.restore(name, dest)  # a fresh checkout: start from the record
+        if restored:
+            print(f"{name}: {restored} verdicts restored from {verdicts.record_path(name)}")
         if not args.report:
             dest.mkdir(parents=True, exist_ok=True)
             sync_tree(dest)
@@ -279,10 +297,11 @@ def main(argv: list[str] | None = None) -> int:
                 if names:
                     skip_unselected(dest, names)
                     names = []
-            rc = run_mutmut(dest, args.children, names, args.nice)
+            rc = run_mutmut(dest, args.children, names, args.nice, package=name)
             if rc != 0:
                 print(f"mutmut run for {name} exited {rc}", file=sys.stderr)
                 ok = False
+        verdicts.save(name, dest)
         summary = summarise(name, dest, pkg, equivalent.get(name, {}))
         (BUILD / f"{name}.json").write_text(json.dumps(summary, indent=2) + "\n")
         summaries.append(summary)
