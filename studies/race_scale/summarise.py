@@ -60,7 +60,9 @@ def summarise(runs: Path) -> dict[str, Any]:
         out["verdict"] = verdict(p.ci_low, p.ci_high)
     else:
         done = sum(len(v) for v in (today, scale))
-        out["verdict"] = f"not yet: {done} of {2 * len(SEEDS)} runs (the rule decides once all exist)"
+        out["verdict"] = (
+            f"not yet: {done} of {2 * len(SEEDS)} runs (the rule decides once all exist)"
+        )
     return out
 
 
