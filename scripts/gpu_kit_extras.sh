@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Adds what `make gpu-check` needs beyond the offline GPU kit (../shared/gpu-kit/build.sh, which
-# writes .gpu/): the pure-Python wheels of pytest, pytest-xdist and their dependencies, into .gpu/wheels/, which
-# `source .gpu/install.sh` installs on the node with the rest. Run here, where PyPI is reachable,
-# after building the kit and before carrying .gpu to the GPU node. About 1.8 MB.
+# writes .gpu/): the pure-Python wheels of pytest, pytest-xdist and their dependencies, into
+# .gpu/wheels/, which `source .gpu/install.sh` installs on the node with the rest. Run here, where
+# PyPI is reachable, after building the kit and before carrying .gpu to the GPU node. About 1.8 MB.
 set -eu
 cd "$(dirname "$0")/.."
 [ -d .gpu/wheels ] || { echo "gpu_kit_extras: no .gpu/wheels: build the kit first (../shared/gpu-kit/build.sh)"; exit 2; }
