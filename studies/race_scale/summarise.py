@@ -80,7 +80,7 @@ def table(res: dict[str, Any]) -> str:
         p = res["paired"]
         lines += [
             "",
-            "| scale − today | pairs | mean diff | 95 % BCa | Wilcoxon p |",
+            "| scale − today | pairs | mean diff | 95 % BCa | Wilcoxon p (two-sided) |",
             "|---|---|---|---|---|",
             f"| success | {p['pairs']} | {p['diff_mean']:+.3f} | {p['ci_low']:+.3f} … "
             f"{p['ci_high']:+.3f} | {p['p_value']:.2f} |",
