@@ -84,16 +84,19 @@ def targets(
              15_000.0],
             [f"PPO end to end, {hi} runners (env steps/s)", fmt(ppo), "≥ 16,000", ppo, 16_000.0],
             [f"PPO+ASOR ÷ PPO end to end, {hi} runners", fmt(rel, 2), "≥ 0.9", rel, 0.9],
-            [f"PPO+ASOR end to end, {hi} ÷ {lo} runners", fmt(ratio, 2), "≥ 10 (÷ 1 runner)",
-             ratio if at_one else None, 10.0],
-            [f"sampling only, {lo} runner(s) (env steps/s)", fmt(sample_one), "≥ 3,000 (1 runner)",
-             sample_one if at_one else None, 3_000.0],
+        ]  # fmt: skip
+        if lo != hi:  # the fewest runners against the most (not shown for one runner count)
+            rows += [
+                [f"PPO+ASOR end to end, {hi} ÷ {lo} runners", fmt(ratio, 2), "≥ 10 (÷ 1 runner)",
+                 ratio if at_one else None, 10.0],
+                [f"sampling only, {lo} runner(s) (env steps/s)", fmt(sample_one),
+                 "≥ 3,000 (1 runner)", sample_one if at_one else None, 3_000.0],
+            ]  # fmt: skip
+        rows += [
             [f"sampling only, {hi} runners (env steps/s)", fmt(sample_many), "≥ 30,000",
              sample_many, 30_000.0],
             ["Learner alone, best (env steps/s)", fmt(best), "≥ 10,000", best, 10_000.0],
         ]  # fmt: skip
-        if lo == hi:  # one runner count: no ratio between counts, no fewest-runner row
-            del rows[3:5]
     over = sorted({r["runners"] for r in (overlap or {}).get("rows", [])})
     if over:
         n = over[-1]

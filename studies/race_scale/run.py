@@ -7,7 +7,7 @@ writes OUT/runs/<method>-<seed>.json (`eval.per_map.*.success` is the rule's met
 skips the runs that exist; an unfinished run starts again. Runs go to Ray as tasks, as many at
 once as the node's CPUs and GPUs allow (a scale run needs 16 CPUs and the GPU).
 
-    python studies/race_scale/run.py --seeds 20 --steps 500000 --out studies/race_scale
+    python studies/race_scale/run.py --seeds 20 --steps 500000 --layout cpu --out studies/race_scale
     python studies/race_scale/run.py --seeds 1 --steps 2048 --layout cpu --out /tmp/race_scale  # smoke
 
 `--layout cpu` (the study's layout since its amendment, README.md; recorded in each run file and
