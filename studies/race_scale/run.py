@@ -1,4 +1,5 @@
-"""Race: the many-runner setting (ppo-asor-scale.yaml) against today's example (ppo-asor.yaml).
+"""Race: the many-runner setting (ppo-asor-scale.yaml) against today's example (ppo-asor.yaml),
+and (studies/race_scale_steps) the many-runner setting with more policy updates per env step.
 
 Each run trains one YAML as written (its env runners, batch, minibatch, Learner device), seed
 `s` (the algorithm's and ASOR's), until `--steps` env steps, then evaluates its stochastic
@@ -8,6 +9,8 @@ skips the runs that exist; an unfinished run starts again. Runs go to Ray as tas
 once as the node's CPUs and GPUs allow (a scale run needs 16 CPUs and the GPU).
 
     python studies/race_scale/run.py --seeds 20 --steps 500000 --layout cpu --out studies/race_scale
+    python studies/race_scale/run.py --methods rollout epochs --seeds 20 --steps 500000 \
+        --layout cpu --out studies/race_scale_steps
     python studies/race_scale/run.py --seeds 1 --steps 2048 --layout cpu --out /tmp/race_scale  # smoke
 
 `--layout cpu` (the study's layout since its amendment, README.md; recorded in each run file and
@@ -26,10 +29,15 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
-METHODS = {
-    "today": ROOT / "tuned_examples/race/ppo-asor.yaml",
-    "scale": ROOT / "tuned_examples/race/ppo-asor-scale.yaml",
+TODAY, SCALE = ROOT / "tuned_examples/race/ppo-asor.yaml", ROOT / "tuned_examples/race/ppo-asor-scale.yaml"
+METHODS: dict[str, tuple[Path, dict[str, int]]] = {
+    "today": (TODAY, {}),
+    "scale": (SCALE, {}),
+    # studies/race_scale_steps: the scale file with more policy updates per env step
+    "rollout": (SCALE, {"train_batch_size": 3584, "minibatch_size": 896}),  # 32-step rollouts
+    "epochs": (SCALE, {"minibatch_size": 1024, "num_epochs": 8}),  # 4x the gradient steps
 }
+"""Each method: its YAML and the `.training()` settings that replace the YAML's."""
 EVAL_EPISODES = 3
 MAX_EPISODE_STEPS = 1000
 
@@ -40,9 +48,12 @@ def build_config(method: str, seed: int, steps: int, layout: str) -> Any:
     import rllib_asor
     from rllib_asor.cli import experiment
 
-    [exp] = experiment.load_file(str(METHODS[method]))
+    yaml, overrides = METHODS[method]
+    [exp] = experiment.load_file(str(yaml))
     config = experiment.validate(exp)
     config = config.debugging(seed=seed)
+    if overrides:
+        config = config.training(**overrides)
     if layout == "cpu":
         envs = max(1, config.num_env_runners) * config.num_envs_per_env_runner
         config = config.env_runners(num_env_runners=0, num_envs_per_env_runner=envs).learners(

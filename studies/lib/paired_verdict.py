@@ -1,0 +1,103 @@
+"""A paired study's table and its fixed rule's verdict: each arm against one baseline, seed by
+seed, on one per-run metric, decided only once the arm and the baseline both have every planned
+seed (studies/race_scale and studies/race_scale_steps use it from their summarise.py)."""
+
+from __future__ import annotations
+
+import json
+import statistics
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from rllib_asor.report.paired import paired_difference
+from studies.lib.compare import load_metric_by_seed
+
+
+def verdict(low: float, high: float, margin: float, pairs: int) -> str:
+    """'as good' iff the interval's lower end is above `margin`, 'worse' iff its upper end is
+    below 0, otherwise undecided."""
+    if low > margin:
+        return "as good"
+    if high < 0:
+        return "worse"
+    return f"not decided at {pairs} pairs"
+
+
+def summarise(
+    study_dirs: Sequence[Path],
+    metric: str,
+    baseline: str,
+    arms: Sequence[str],
+    seeds: Sequence[int],
+    margin: float,
+) -> dict[str, Any]:
+    """Per method: runs, mean ± sd, seeds at 0, mean training wall time; per arm: the paired
+    difference arm − baseline and the verdict once both have every seed in `seeds`."""
+    by_seed = load_metric_by_seed(list(study_dirs), metric)
+    walls: dict[str, list[float]] = {}
+    for folder in study_dirs:
+        for path in sorted((folder / "runs").glob("*.json")):
+            run = json.loads(path.read_text())
+            walls.setdefault(run["method"], []).append(run["train_wall_s"])
+    methods = {
+        m: {
+            "runs": len(v),
+            "mean": statistics.fmean(v.values()),
+            "std": statistics.stdev(v.values()) if len(v) > 1 else 0.0,
+            "dead": sum(x == 0 for x in v.values()),
+            "train_wall_s": statistics.fmean(walls.get(m, [float("nan")])),
+        }
+        for m, v in sorted(by_seed.items())
+        if m == baseline or m in arms
+    }
+    base = by_seed.get(baseline, {})
+    out: dict[str, Any] = {"methods": methods, "arms": {}}
+    for arm in arms:
+        mine = by_seed.get(arm, {})
+        if set(base) >= set(seeds) and set(mine) >= set(seeds):
+            p = paired_difference(
+                {s: base[s] for s in seeds}, {s: mine[s] for s in seeds},
+                baseline_name=baseline, treatment_name=arm, metric=metric,
+            )  # fmt: skip
+            out["arms"][arm] = {
+                "paired": p.to_json(),
+                "verdict": verdict(p.ci_low, p.ci_high, margin, len(seeds)),
+            }
+        else:
+            done = len(set(mine) & set(seeds))
+            out["arms"][arm] = {
+                "verdict": f"not yet: {done} of {len(seeds)} runs (the rule decides once all exist)"
+            }
+    return out
+
+
+def table(res: dict[str, Any], baseline: str, wall_note: str) -> str:
+    """Markdown: one row per method, one paired row per decided arm, one verdict per arm."""
+    lines = [
+        "| file | runs | success on unseen courses (mean ± sd) | seeds at 0 | "
+        f"training wall s ({wall_note}) |",
+        "|---|---|---|---|---|",
+    ]
+    for m, v in res["methods"].items():
+        lines.append(
+            f"| {m} | {v['runs']} | {v['mean']:.3f} ± {v['std']:.3f} | {v['dead']} | "
+            f"{v['train_wall_s']:.0f} |"
+        )
+    decided = {a: r for a, r in res["arms"].items() if "paired" in r}
+    if decided:
+        lines += [
+            "",
+            f"| arm − {baseline} | pairs | mean diff | 95 % BCa | Wilcoxon p (two-sided) |",
+            "|---|---|---|---|---|",
+        ]
+        for arm, r in decided.items():
+            p = r["paired"]
+            lines.append(
+                f"| {arm} | {p['pairs']} | {p['diff_mean']:+.3f} | {p['ci_low']:+.3f} … "
+                f"{p['ci_high']:+.3f} | {p['p_value']:.2f} |"
+            )
+    lines.append("")
+    for arm, r in res["arms"].items():
+        lines.append(f"Verdict for {arm} (README.md's rule): **{r['verdict']}**  ")
+    return "\n".join(lines).rstrip() + "\n"
