@@ -29,7 +29,10 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
-TODAY, SCALE = ROOT / "tuned_examples/race/ppo-asor.yaml", ROOT / "tuned_examples/race/ppo-asor-scale.yaml"
+TODAY, SCALE = (
+    ROOT / "tuned_examples/race/ppo-asor.yaml",
+    ROOT / "tuned_examples/race/ppo-asor-scale.yaml",
+)
 METHODS: dict[str, tuple[Path, dict[str, int]]] = {
     "today": (TODAY, {}),
     "scale": (SCALE, {}),
