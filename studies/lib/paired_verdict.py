@@ -101,3 +101,15 @@ def table(res: dict[str, Any], baseline: str, wall_note: str) -> str:
     for arm, r in res["arms"].items():
         lines.append(f"Verdict for {arm} (README.md's rule): **{r['verdict']}**  ")
     return "\n".join(lines).rstrip() + "\n"
+
+
+def cli(default_folder: Path, summarise: Any, table: Any) -> None:
+    """A study's `summarise.py` as a script: STUDY_DIR (argv[1], else `default_folder`) → its
+    summary.json and table.md, and the table printed."""
+    import sys
+
+    folder = Path(sys.argv[1]) if len(sys.argv) > 1 else default_folder
+    res = summarise(folder / "runs")
+    (folder / "summary.json").write_text(json.dumps(res, indent=1))
+    (folder / "table.md").write_text(table(res))
+    print(table(res))

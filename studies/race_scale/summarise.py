@@ -8,7 +8,6 @@ Reads STUDY_DIR/runs/*.json (default: this folder) and writes table.md and summa
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -34,8 +33,4 @@ def table(res: dict[str, Any]) -> str:
 
 
 if __name__ == "__main__":
-    folder = Path(sys.argv[1]) if len(sys.argv) > 1 else HERE
-    res = summarise(folder / "runs")
-    (folder / "summary.json").write_text(json.dumps(res, indent=1))
-    (folder / "table.md").write_text(table(res))
-    print(table(res))
+    paired_verdict.cli(HERE, summarise, table)
