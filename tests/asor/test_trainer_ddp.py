@@ -31,6 +31,7 @@ def _train(rank: int, world: int, init_file: str, out: str) -> None:
             },
             Path(out) / f"{rank}.pt",
         )
+        dist.barrier()  # neither rank tears gloo down while the other still talks to it
     finally:
         dist.destroy_process_group()
 
