@@ -124,6 +124,7 @@ def _all_cases(rank: int, store: str, out: str) -> None:
         cases["multi_agent"] = _ma_pieces_of_rank(rank)
         cases["maple"] = _maple_pieces_of_rank(rank)
         torch.save(cases, Path(out) / f"{rank}.pt")
+        dist.barrier()  # neither rank tears gloo down while the other still talks to it
     finally:
         dist.destroy_process_group()
 

@@ -56,6 +56,7 @@ def _round_on_rank(rank: int, world: int, init_file: str, out: str) -> None:
         trainer = _trainer("round")
         trainer.update(_policy(trainer, [[4.0, 6.0], [8.0, 10.0]][rank]))
         torch.save({"mean": trainer.disc.mean, "std": trainer.disc.std}, Path(out) / f"{rank}.pt")
+        dist.barrier()  # neither rank tears gloo down while the other still talks to it
     finally:
         dist.destroy_process_group()
 
