@@ -2,7 +2,7 @@
 
 OMP_NUM_THREADS=1 nice .venv/bin/python studies/dara_check/run.py [--iters N] [--seeds 0 1 2]
 
-Each finished run is saved to runs/<method>-seed<k>.json at once; a rerun skips it
+Each finished run is saved to runs/<method>-seed<k>.json.gz at once; a rerun skips it
 (summarise.py: the table and the rule's verdicts). The stand-in datasets
 are written under data/ beside this file (`make_data`, seed fixed, the same for every run).
 """
@@ -16,6 +16,8 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+
+from studies.lib.run_files import existing, run_file, write_run
 
 HERE = Path(__file__).resolve().parent
 DATA = HERE / "data"
@@ -245,13 +247,13 @@ def main() -> None:
     RUNS.mkdir(exist_ok=True)
     for seed in args.seeds:
         for method in args.methods:
-            path = RUNS / f"{method}-seed{seed}.json"
-            if path.is_file():
+            path = run_file(RUNS, f"{method}-seed{seed}")
+            if existing(path):
                 continue
             result = {"method": method, "seed": seed, "iters": args.iters}
             arm, _, variant = method.partition("+")  # `maple+cover`: MAPLE on the `cover` data
             result.update(run(arm, seed, args.iters, make_data(variant)))
-            path.write_text(json.dumps(result, indent=1, sort_keys=True) + "\n")
+            write_run(path, result)
             print(path.name, json.dumps(result), flush=True)
     from summarise import summarise, table
 

@@ -4,13 +4,12 @@ coverage rule on seeds 6–8 and the data whose target part covers the source's 
 
     .venv/bin/python studies/dara_check/summarise.py [RUNS_DIR]
 
-Reads RUNS_DIR/*.json (default: runs/ beside this file); `make results` writes table.md and
+Reads the run files of RUNS_DIR (default: runs/ beside this file); `make results` writes table.md and
 summary.json from it (studies/lib/pages.py, runner "script").
 """
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -18,6 +17,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from studies.lib.compare import sign_rule
+from studies.lib.run_files import read_runs
 
 HERE = Path(__file__).resolve().parent
 MARGIN = 10.0
@@ -95,8 +95,7 @@ def summarise(runs: Path) -> dict[str, Any]:
     """Per rule: each method's normalised scores on the rule's seeds, their mean, *learns* for
     MAPLE and the rule's DARA arm, and DARA − MAPLE paired by seed (when every run exists)."""
     raw: dict[str, dict[int, float]] = {}
-    for path in sorted(Path(runs).glob("*.json")):
-        run = json.loads(path.read_text())
+    for run in read_runs(Path(runs)):
         raw.setdefault(run["method"], {})[int(run["seed"])] = float(run["score"])
     scores = _norm(raw)
     out: dict[str, Any] = {}

@@ -1,6 +1,6 @@
 """ESCP vs ESCP+ASOR on Walker2d under gravity shift: a resumable runner.
 
-One independent job per (method, seed), each run saved at once to RUNS/<method>-<seed>.json;
+One independent job per (method, seed), each run saved at once to RUNS/<method>-<seed>.json.gz;
 an unfinished run is saved at every evaluation point (RUNS/<method>-<seed>.partial/) and
 continued from there; a rerun skips finished runs, so the study resumes where it stopped and several processes (one
 per core, different --seeds or --methods) can share one folder. The decision rule and budget
@@ -193,16 +193,17 @@ def main(argv: list[str] | None = None) -> None:
     args = p.parse_args(argv)
     out = Path(args.out)
     (out / "runs").mkdir(parents=True, exist_ok=True)
-    from studies.lib.common import start_local_ray, write_json
+    from studies.lib.common import start_local_ray
+    from studies.lib.run_files import existing, read_run, run_file, write_run
 
     started = False
     for seed in args.seeds:
         for method in args.methods:
-            path = out / "runs" / f"{method}-{seed}.json"
-            if path.exists():
-                have = json.loads(path.read_text()).get("settings")
+            path = run_file(out / "runs", f"{method}-{seed}")
+            if done := existing(path):
+                have = read_run(done).get("settings")
                 if have != json.loads(json.dumps(settings(args))):
-                    raise SystemExit(f"{path} was made with other settings: {have}")
+                    raise SystemExit(f"{done} was made with other settings: {have}")
                 continue
             if not started:
                 start_local_ray()
@@ -210,7 +211,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"run {method}-{seed} ({os.getpid()})", flush=True)
             partial = out / "runs" / f"{method}-{seed}.partial"
             res = run_one(method, seed, args, partial)
-            write_json(path, res)
+            write_run(path, res)
             shutil.rmtree(partial, ignore_errors=True)
             print(f"  {method}-{seed} eval {res['eval']} wall {res['wall_s']:.0f}s", flush=True)
 

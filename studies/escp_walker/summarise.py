@@ -4,7 +4,7 @@ verdict of the rule fixed in studies/escp_walker/README.md.
 
     .venv/bin/python studies/escp_walker/summarise.py [STUDY_DIR]
 
-Reads STUDY_DIR/runs/*.json (default: this folder) and writes table.md and summary.json there.
+Reads the run files of STUDY_DIR/runs/ (default: this folder) and writes table.md and summary.json there.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))
+from studies.lib.run_files import read_runs  # noqa: E402  (after the path)
 
 LEARNS_AT = 1000.0
 """ESCP 'learns' if its mean stationary return on unseen tasks is ≥ this (rule, docs)."""
@@ -36,8 +37,7 @@ SETTINGS = ("stationary", "ns")
 
 def load(runs: Path) -> dict[str, dict[int, dict[str, float]]]:
     out: dict[str, dict[int, dict[str, float]]] = {}
-    for path in sorted(runs.glob("*.json")):
-        run = json.loads(path.read_text())
+    for run in read_runs(runs):
         out.setdefault(run["method"], {})[int(run["seed"])] = run["eval"]
     return out
 

@@ -1,6 +1,7 @@
-"""What every study runner shares: resumable run files, partial saves of unfinished runs, the
-(method, seed) grid on Ray Tune, and table cells. Ray start-up and atomic JSON writes are the
-speed benchmarks' (`benchmarks.common`), re-exported here so a study imports one module."""
+"""What every study runner shares: resumable run files (`studies.lib.run_files`), partial saves
+of unfinished runs, the (method, seed) grid on Ray Tune, and table cells. Ray start-up and atomic
+JSON writes are the speed benchmarks' (`benchmarks.common`), re-exported here so a study imports
+one module."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import start_local_ray, write_json
+from studies.lib.run_files import existing, read_run, run_file, write_run
 
 __all__ = [
     "load_partial",
@@ -73,13 +75,14 @@ def load_partial(partial: Path) -> tuple[dict[str, Any], Path] | None:
 
 
 def run_if_missing(path: Path, label: str, run: Callable[[], dict[str, Any]]) -> None:
-    """One sequential benchmark run: skipped when its run file exists (a rerun resumes where
-    it stopped), else `run()`, its result written atomically to `path`, progress printed."""
-    if path.exists():
+    """One sequential benchmark run: skipped when its run file (`run_files.run_file`) exists (a
+    rerun resumes where it stopped), else `run()`, its result written to `path`, progress
+    printed."""
+    if existing(path):
         return
     print(f"run {label}", flush=True)
     res = run()
-    write_json(path, res)
+    write_run(path, res)
     print(f"  eval {res['eval']} wall {res['wall_s']:.0f}s", flush=True)
 
 
@@ -96,19 +99,17 @@ def runs_made_otherwise(
     settings: dict[str, Any],
     defaults: dict[str, Any] | None = None,
 ) -> list[str]:
-    """Run files OUT/runs/<method>-<seed>.json that exist and record other `settings` than
-    these. A rerun keeps finished runs, so without this check one folder could silently mix
-    settings. A key a file lacks counts as `defaults[key]`, or is not compared."""
-    import json
-
+    """Run files OUT/runs/<method>-<seed> that exist and record other `settings` than these.
+    A rerun keeps finished runs, so without this check one folder could silently mix settings.
+    A key a file lacks counts as `defaults[key]`, or is not compared."""
     defaults = defaults or {}
     clash = []
     for name in names:
         for seed in seeds:
-            path = out / "runs" / f"{name}-{seed}.json"
-            if not path.exists():
+            path = existing(run_file(out / "runs", f"{name}-{seed}"))
+            if path is None:
                 continue
-            run = json.loads(path.read_text())
+            run = read_run(path)
             for key, want in settings.items():
                 if key not in run and key not in defaults:
                     continue
@@ -126,7 +127,7 @@ def run_method_seed_grid(
     out: Path,
     cpus_per_trial: int = 1,
 ) -> None:
-    """One Tune trial per (method, seed) whose `out/runs/<method>-<seed>.json` is missing, so
+    """One Tune trial per (method, seed) whose run file `out/runs/<method>-<seed>` is missing, so
     an interrupted benchmark resumes where it stopped. A trial holds `cpus_per_trial` CPUs: one
     for itself, the rest for the env runners it starts.
 
@@ -141,7 +142,7 @@ def run_method_seed_grid(
         {"method": n, "asor": a, "seed": s, "args": shared, "out": str(out)}
         for s in seeds
         for n, a in methods
-        if not (out / "runs" / f"{n}-{s}.json").exists()
+        if not existing(run_file(out / "runs", f"{n}-{s}"))
     ]
     t0 = time.time()
     if specs:

@@ -11,7 +11,7 @@ difference and a one-sided Wilcoxon signed-rank p. Our benchmarks give a seed th
 initial weights and the same stream of env dynamics for every method, so where that shared
 luck matters (Hopper: same-seed returns correlate at ~0.5) pairing narrows the interval.
 
-Reads every DIR/runs/*.json (fields "method", "seed" and the metric). `--metric` is a dotted
+Reads every run file of DIR/runs/ (`studies.lib.run_files`; fields "method", "seed" and the metric). `--metric` is a dotted
 path into a run file; a `*` part averages over all keys at that level, e.g. the race success
 rate (mean over the ten maps): `--metric 'eval.per_map.*.success'`. Booleans count as 0/1
 (`--metric escaped_trap`).
@@ -20,7 +20,6 @@ rate (mean over the ten maps): `--metric 'eval.per_map.*.success'`. Booleans cou
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from rllib_asor.report.paired import paired_difference, unpaired_difference
+from studies.lib.run_files import read_run, run_paths
 
 
 def _std(x: np.ndarray) -> float:
@@ -86,7 +86,7 @@ def metric_value(run: dict[str, Any], path: str) -> float:
 
 
 def load_metric(dirs: Sequence[Path], metric: str) -> dict[str, list[float]]:
-    """method → metric values over its runs in every DIR/runs/*.json (a (method, seed) seen
+    """method → metric values over its runs in every DIR/runs/ (a (method, seed) seen
     twice counts once; runs without a finite metric are skipped; both warned on stderr)."""
     return {m: list(by_seed.values()) for m, by_seed in load_metric_by_seed(dirs, metric).items()}
 
@@ -96,8 +96,8 @@ def load_metric_by_seed(dirs: Sequence[Path], metric: str) -> dict[str, dict[Any
     values: dict[str, dict[Any, float]] = {}
     seen: set[tuple[str, Any]] = set()
     for d in dirs:
-        for p in sorted(Path(d, "runs").glob("*.json")):
-            run = json.loads(p.read_text())
+        for p in run_paths(Path(d, "runs")):
+            run = read_run(p)
             key = (run["method"], run.get("seed"))
             if key in seen:
                 print(f"warning: {p}: {key} already read, skipped", file=sys.stderr)

@@ -13,7 +13,7 @@ Methods are named on the command line as `name:key=value,...` over AsorConfig fi
 
 `asor:` (or `asor`) alone means the AsorConfig defaults. `--layout E` trains and evaluates on
 layout E (start (0,3)); keep each layout in its own `--out` (the run files are named
-`<method>-<seed>.json`, and the summary skips runs of another layout). Every run records
+`<method>-<seed>.json.gz`, and the summary skips runs of another layout). Every run records
 `escaped_trap`: its greedy policy reaches the goal on the trap row (`TRAP_ROW`, row 2).
 """
 
@@ -33,8 +33,8 @@ from studies.lib.common import (
     run_method_seed_grid,
     runs_made_otherwise,
     start_local_ray,
-    write_json,
 )
+from studies.lib.run_files import read_run, run_file, run_paths, write_run
 
 DEFAULT_METHODS = (
     "ppo",
@@ -180,8 +180,7 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
         and spec["seed"] == 0
     ):
         final["pseudo_counts"] = pseudo_counts(algo.learner_group._learner)
-    out = Path(spec["out"]) / "runs" / f"{spec['method']}-{spec['seed']}.json"
-    write_json(out, final)
+    write_run(run_file(Path(spec["out"]) / "runs", f"{spec['method']}-{spec['seed']}"), final)
     algo.stop()
     tune.report({"steps": steps, "greedy_return_mean": final["greedy_return_mean"], "done": True})
     return final
@@ -198,8 +197,8 @@ def load_runs(out: Path, layout: str = "B") -> list[dict[str, Any]]:
     """The run files under `out/runs` of `layout` (files without a layout are B); the others
     are skipped with a warning."""
     runs, other = [], []
-    for p in sorted((out / "runs").glob("*.json")):
-        run = json.loads(p.read_text())
+    for p in run_paths(out / "runs"):
+        run = read_run(p)
         if run.get("layout", "B") == layout:
             runs.append(run)
         else:

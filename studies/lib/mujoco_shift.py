@@ -20,8 +20,8 @@ spelled its settings out:
         srpo:preset=paper,mode=srpo,lambda_=0.05,rho_value=0.5,rho_count=0.5,proxy=rnd,reward_form=log \
         asor:preset=paper,mode=asor,lambda_=0.05,rho_value=0.5,rho_count=0.5,proxy=rnd,reward_form=log
 
-Each run is written to OUT/runs/<task>-<method>-<seed>.json (SAC, the old names) or
-OUT/runs/<task>-ppo-<method>-<seed>.json (PPO) as soon as it ends (a rerun skips finished runs);
+Each run is written to OUT/runs/<task>-<method>-<seed>.json.gz (SAC, the old names) or
+OUT/runs/<task>-ppo-<method>-<seed>.json.gz (PPO; `studies.lib.run_files`) as soon as it ends (a rerun skips finished runs);
 `--summarize-only` rebuilds OUT/table.md and OUT/summary.json from them, one table per algo.
 A run file holds `eval` (per dynamics), `eval_return_mean` (mean return over the three),
 `curve` ([env steps, training episode return] per iteration) and `asor_last` (the last
@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 
 from studies.lib.common import mean_std, round_floats, run_if_missing, start_local_ray
+from studies.lib.run_files import read_runs, run_file
 
 DEFAULT_METHODS = {
     "sac": ("sac", "srpo:mode=srpo", "asor:mode=asor"),
@@ -218,9 +219,9 @@ def run_one(
 
 
 def summarize(out: Path) -> str:
-    """Markdown table per algo (mean ± std over seeds) from OUT/runs/*.json (a run file without
+    """Markdown table per algo (mean ± std over seeds) from OUT/runs/ (a run file without
     `algo` is SAC). With SAC runs only, one table."""
-    runs = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*.json"))]
+    runs = read_runs(out / "runs")
     algos = sorted({r.get("algo", "sac") for r in runs}, key=lambda a: (a != "sac", a))
     table: dict[str, Any] = {}
     parts = []
@@ -261,9 +262,10 @@ def summarize(out: Path) -> str:
 
 
 def run_path(out: Path, algo: str, task: str, method: str, seed: int) -> Path:
-    """OUT/runs/<task>-<method>-<seed>.json (SAC, as before) or <task>-ppo-<method>-<seed>.json."""
+    """The run file OUT/runs/<task>-<method>-<seed> (SAC, as before) or
+    <task>-<algo>-<method>-<seed> (`run_files.run_file`)."""
     stem = f"{task}-{method}-{seed}" if algo == "sac" else f"{task}-{algo}-{method}-{seed}"
-    return out / "runs" / f"{stem}.json"
+    return run_file(out / "runs", stem)
 
 
 def _order(method: str) -> int:

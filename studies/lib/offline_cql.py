@@ -11,7 +11,7 @@ returns (`rllib_asor.data.scoring.evaluate`).
         --iters 20 --iter-updates 100 --out studies/out/offline_cql
 
 Methods are `name[:key=value,...]` over AsorConfig fields (`cql` = no ASOR), as in
-`studies.lib.mujoco_shift`. Runs are written to OUT/runs/<quality>-<method>-<seed>.json as they
+`studies.lib.mujoco_shift`. Runs are written to OUT/runs/<quality>-<method>-<seed>.json.gz as they
 end (a rerun skips them); `--summarize-only` rebuilds OUT/table.md and OUT/summary.json.
 """
 
@@ -28,6 +28,7 @@ import numpy as np
 from studies.lib.common import mean_std, run_if_missing, start_local_ray
 from studies.lib.compare import sign_rule
 from studies.lib.mujoco_shift import parse_method
+from studies.lib.run_files import read_runs, run_file
 
 DEFAULT_METHODS = ("cql", "srpo:mode=srpo", "asor:mode=asor")
 MARGIN = 5.0
@@ -105,7 +106,7 @@ def run_one(method: str, seed: int, asor: dict[str, Any] | None, args: argparse.
 
 def summarize(out: Path) -> str:
     """Markdown table: normalised score per dynamics and their mean (mean ± std over seeds)."""
-    runs = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*.json"))]
+    runs = read_runs(out / "runs")
     dyns = [d for d in (runs[0]["eval"] if runs else {}) if d != "mean"]
     lines = [
         "| quality | method | seeds | updates | "
@@ -204,7 +205,7 @@ def main(argv: list[str] | None = None) -> None:
             for text in args.methods:
                 name, asor = parse_method(text, plain="cql", base=ASOR_BASE)
                 run_if_missing(
-                    out / "runs" / f"{args.quality}-{name}-{seed}.json",
+                    run_file(out / "runs", f"{args.quality}-{name}-{seed}"),
                     f"{args.quality} {name} seed {seed}",
                     lambda: run_one(name, seed, asor, args),  # noqa: B023 (called at once)
                 )

@@ -12,6 +12,7 @@ from typing import Any
 
 from rllib_asor.report.paired import paired_difference
 from studies.lib.compare import load_metric_by_seed
+from studies.lib.run_files import read_runs
 
 
 def verdict(low: float, high: float, margin: float, pairs: int) -> str:
@@ -37,8 +38,7 @@ def summarise(
     by_seed = load_metric_by_seed(list(study_dirs), metric)
     walls: dict[str, list[float]] = {}
     for folder in study_dirs:
-        for path in sorted((folder / "runs").glob("*.json")):
-            run = json.loads(path.read_text())
+        for run in read_runs(folder / "runs"):
             walls.setdefault(run["method"], []).append(run["train_wall_s"])
     methods = {
         m: {

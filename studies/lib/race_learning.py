@@ -12,7 +12,7 @@ privileged, the expert) and a uniformly random policy.
 Methods are named as in `studies.lib.lava_reproduction` (`name:key=value,...` over AsorConfig
 fields; `ppo` = no ASOR). ASOR and SRPO see `RACE_ASOR_OBS_KEYS` unless `obs_keys` is given.
 Seeds are `--first-seed` .. `--first-seed + --seeds - 1`. Each run is written to
-OUT/runs/<method>-<seed>.json as soon as it finishes; existing run files are kept (a rerun
+OUT/runs/<method>-<seed>.json.gz (`studies.lib.run_files`) as soon as it finishes; existing run files are kept (a rerun
 only adds what is missing; one with another `--sampling` or `--model-config` than a kept run
 recorded is refused); the success rate is `eval.per_map.<map>.success` in them
 (`python -m studies.lib.compare --metric 'eval.per_map.*.success'` averages over the maps);
@@ -40,6 +40,7 @@ from studies.lib.common import (
     write_json,
 )
 from studies.lib.lava_reproduction import DEFAULT_METHODS, parse_method
+from studies.lib.run_files import read_runs, run_file, write_run
 
 
 def model_config_arg(text: str) -> str:
@@ -188,7 +189,7 @@ def run_one(config: dict[str, Any]) -> dict[str, Any]:
         },
         "asor_last": {k: float(v) for k, v in result.get("asor", {}).items()},
     }
-    write_json(Path(spec["out"]) / "runs" / f"{spec['method']}-{spec['seed']}.json", final)
+    write_run(run_file(Path(spec["out"]) / "runs", f"{spec['method']}-{spec['seed']}"), final)
     algo.stop()
     tune.report({"steps": steps, "done": True})
     return final
@@ -219,7 +220,7 @@ def _row(name: str, evs: list[dict[str, Any]], steps: str, n: str) -> tuple[str,
 
 def summarize(out: Path, methods: list[str]) -> str:
     """Markdown tables (overall and success per map) + summary.json from the run files."""
-    runs = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*.json"))]
+    runs = read_runs(out / "runs")
     refs = {p.stem: json.loads(p.read_text()) for p in sorted((out / "reference").glob("*.json"))}
     head = "| policy | runs | env steps | " + " | ".join(t for _, t in COLUMNS) + " |"
     lines = [head, "|---|---|---|" + "---|" * len(COLUMNS)]

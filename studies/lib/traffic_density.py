@@ -7,7 +7,7 @@ speed). highway-env costs 35-175 ms per decision on one core, so the budget is t
 
     python -m studies.lib.traffic_density --seeds 1 --steps 1500 --out studies/out/traffic_density
 
-Runs are written to OUT/runs/<method>-<seed>.json as they end (a rerun skips them);
+Runs are written to OUT/runs/<method>-<seed>.json.gz as they end (a rerun skips them);
 `--summarize-only` rebuilds OUT/table.md and OUT/summary.json.
 """
 
@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from studies.lib.common import round_floats, run_if_missing, start_local_ray
+from studies.lib.run_files import read_runs, run_file
 
 METHODS = {
     "ppo": None,
@@ -119,7 +120,7 @@ def run_one(method: str, seed: int, args: argparse.Namespace) -> dict[str, Any]:
 
 
 def summarize(out: Path, densities: list[float]) -> str:
-    runs = [json.loads(p.read_text()) for p in sorted((out / "runs").glob("*.json"))]
+    runs = read_runs(out / "runs")
     ds = [str(d) for d in densities]
     lines = [
         "| method | seeds | env steps | "
@@ -181,7 +182,7 @@ def main(argv: list[str] | None = None) -> None:
         for seed in range(args.seeds):
             for method in args.methods:
                 run_if_missing(
-                    out / "runs" / f"{method}-{seed}.json",
+                    run_file(out / "runs", f"{method}-{seed}"),
                     f"{method} seed {seed}",
                     lambda: run_one(method, seed, args),  # noqa: B023 (called at once)
                 )

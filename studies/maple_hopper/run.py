@@ -1,7 +1,7 @@
 """MAPLE vs MAPLE+ASOR on the mixed-dynamics Hopper data, CQL and MOPO beside.
 
 A resumable runner: one independent job per (dataset, method, seed), each run saved at once to
-RUNS/<dataset>-<method>-<seed>.json; a rerun skips finished runs, and a job another process is
+RUNS/<dataset>-<method>-<seed>.json.gz; a rerun skips finished runs, and a job another process is
 running (its lock file names a live pid) is skipped too, so several processes (one per core,
 different --datasets / --seeds) can share one folder. An unfinished run is saved after every
 iteration (RUNS/<name>.partial/: the algorithm with its model pool and sampler, the curve; ~0.6
@@ -49,6 +49,7 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
+from studies.lib.run_files import existing, read_run, run_file, run_paths, write_run  # noqa: E402
 
 ENV_ID = "rllib_asor/HopperShift-v0"
 DYNAMICS = ("original", "body_mass", "density_10")
@@ -248,8 +249,8 @@ def runs_on_other_data(runs: Path, dataset: str, seed: int, fingerprint: str) ->
     could not pair with them (summarise.py refuses a (dataset, seed) from two data builds)."""
     return [
         path.name
-        for path in sorted(runs.glob(f"{dataset}-*-{seed}.json"))
-        if (r := json.loads(path.read_text()))["dataset"] == dataset
+        for path in run_paths(runs, f"{dataset}-*-{seed}")
+        if (r := read_run(path))["dataset"] == dataset
         and int(r["seed"]) == seed
         and r.get("data_fingerprint") != fingerprint
     ]
@@ -322,7 +323,7 @@ def main(argv: list[str] | None = None) -> None:
                 raise SystemExit(
                     f"missing dataset part {path}; make the data first: `make datasets`"
                 )
-    from studies.lib.common import start_local_ray, write_json
+    from studies.lib.common import start_local_ray
 
     start_local_ray(num_cpus=4)  # CQL: Ray Data takes a read task and two OfflinePreLearner actors
     if args.ensembles_only:
@@ -338,8 +339,8 @@ def main(argv: list[str] | None = None) -> None:
         for dataset in args.datasets:
             for method in args.methods:
                 name = f"{dataset}-{method}-{seed}"
-                out, lock = runs / f"{name}.json", runs / f"{name}.lock"
-                if out.exists() or _locked_by_other(lock):
+                out, lock = run_file(runs, name), runs / f"{name}.lock"
+                if existing(out) or _locked_by_other(lock):
                     continue
                 if other := runs_on_other_data(runs, dataset, seed, prints[dataset]):
                     print(
@@ -353,7 +354,7 @@ def main(argv: list[str] | None = None) -> None:
                     print(f"run {name}", flush=True)
                     partial = runs / f"{name}.partial"
                     res = run_one(dataset, method, seed, args, partial, prints[dataset])
-                    write_json(out, res)
+                    write_run(out, res)
                     shutil.rmtree(partial, ignore_errors=True)
                     print(
                         f"  {name}: score {res['score']:.1f} wall {res['wall_s']:.0f}s", flush=True

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from studies.lib.run_files import read_run, run_paths
+
 HERE = Path(__file__).resolve().parent
 PAPER = {  # Table 1 of the paper (normalised ×100), Hopper rows
     "medium": {"maple": 38.0, "maple_asor_paper": 71.0},
@@ -46,8 +48,8 @@ def load(runs: Path) -> dict[tuple[str, str], dict[int, dict[str, Any]]]:
     """{(dataset, method): {seed: run}}."""
     out: dict[tuple[str, str], dict[int, dict[str, Any]]] = {}
     prints: dict[tuple[str, int], dict[str, list[str]]] = {}
-    for path in sorted(runs.glob("*.json")):
-        r = json.loads(path.read_text())
+    for path in run_paths(runs):
+        r = read_run(path)
         out.setdefault((r["dataset"], r["method"]), {})[int(r["seed"])] = r
         fp = r.get("data_fingerprint", "unrecorded")
         prints.setdefault((r["dataset"], int(r["seed"])), {}).setdefault(fp, []).append(path.name)

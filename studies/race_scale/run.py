@@ -4,7 +4,7 @@ and (studies/race_scale_steps) the many-runner setting with more policy updates 
 Each run trains one YAML as written (its env runners, batch, minibatch, Learner device), seed
 `s` (the algorithm's and ASOR's), until `--steps` env steps, then evaluates its stochastic
 policy on 3 unseen courses per map (`rllib_asor.race.evaluation`, as studies/race_250k) and
-writes OUT/runs/<method>-<seed>.json (`eval.per_map.*.success` is the rule's metric). A rerun
+writes OUT/runs/<method>-<seed>.json.gz (`eval.per_map.*.success` is the rule's metric). A rerun
 skips the runs that exist; an unfinished run starts again. Runs go to Ray as tasks, as many at
 once as the node's CPUs and GPUs allow (a scale run needs 16 CPUs and the GPU).
 
@@ -21,12 +21,13 @@ total number of envs (the same rollouts, batch, minibatch and epochs), one CPU p
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from pathlib import Path
 from typing import Any
+
+from studies.lib.run_files import existing, read_run, run_file, write_run
 
 ROOT = Path(__file__).resolve().parents[2]
 TODAY, SCALE = (
@@ -122,9 +123,9 @@ def main(argv: list[str] | None = None) -> int:
     specs = []
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         for method in args.methods:
-            path = runs / f"{method}-{seed}.json"
-            if path.exists():
-                have = json.loads(path.read_text())
+            path = existing(run_file(runs, f"{method}-{seed}"))
+            if path:
+                have = read_run(path)
                 if (have.get("layout"), have.get("budget")) != (args.layout, args.steps):
                     parser.error(
                         f"{path} was made with layout {have.get('layout')!r}, budget "
@@ -149,10 +150,7 @@ def main(argv: list[str] | None = None) -> int:
         [done], _ = ray.wait(list(pending), num_returns=1)
         spec = pending.pop(done)
         record = ray.get(done)
-        path = runs / f"{spec['method']}-{spec['seed']}.json"
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(record))
-        os.replace(tmp, path)
+        write_run(run_file(runs, f"{spec['method']}-{spec['seed']}"), record)
         success = record["eval"]["mean"]["success"]
         print(
             f"{spec['method']}-{spec['seed']}: success {success:.2f}, "

@@ -3,7 +3,7 @@
 
     .venv/bin/python studies/race_scale/summarise.py [STUDY_DIR]
 
-Reads STUDY_DIR/runs/*.json (default: this folder) and writes table.md and summary.json there.
+Reads the run files of STUDY_DIR/runs/ (default: this folder) and writes table.md and summary.json there.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 
     .venv/bin/python studies/race_scale_steps/summarise.py [STUDY_DIR]
 
-Reads STUDY_DIR/runs/*.json and ../race_scale/runs/*.json (the baseline), and writes table.md
+Reads the run files of STUDY_DIR/runs/ and ../race_scale/runs/ (the baseline), and writes table.md
 and summary.json in STUDY_DIR (default: this folder).
 """
 
