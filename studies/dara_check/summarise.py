@@ -57,7 +57,9 @@ class Rule(NamedTuple):
 
     @property
     def bar(self) -> str:
-        return f"mean ≥ {self.learns_at:g}" + (", > never moving per seed" if self.above_still else "")
+        return f"mean ≥ {self.learns_at:g}" + (
+            ", > never moving per seed" if self.above_still else ""
+        )
 
 
 RULES = (
@@ -112,7 +114,9 @@ def summarise(runs: Path) -> dict[str, Any]:
         part: dict[str, Any] = {"seeds": seeds, "bar": rule.bar, "methods": methods, "learns": {}}
         complete = {m for m, v in methods.items() if len(v["seeds"]) == len(seeds)}
         if "still" in complete or not rule.above_still:
-            still = {s: v["normalised"] for s, v in methods.get("still", {"seeds": {}})["seeds"].items()}
+            still = {
+                s: v["normalised"] for s, v in methods.get("still", {"seeds": {}})["seeds"].items()
+            }
             for m in (rule.maple, rule.dara):
                 if m in complete:
                     by = {s: v["normalised"] for s, v in methods[m]["seeds"].items()}

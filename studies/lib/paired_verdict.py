@@ -1,12 +1,15 @@
 """A paired study's table and its fixed rule's verdict: each arm against one baseline, seed by
 seed, on one per-run metric, decided only once the arm and the baseline both have every planned
-seed (studies/race_scale and studies/race_scale_steps use it from their summarise.py)."""
+seed. A study's summarise.py states its rule as a `PairedStudy` (studies/race_scale,
+race_scale_steps, race_scale_budget)."""
 
 from __future__ import annotations
 
 import json
 import statistics
+import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -103,13 +106,33 @@ def table(res: dict[str, Any], baseline: str, wall_note: str) -> str:
     return "\n".join(lines).rstrip() + "\n"
 
 
-def cli(default_folder: Path, summarise: Any, table: Any) -> None:
-    """A study's `summarise.py` as a script: STUDY_DIR (argv[1], else `default_folder`) → its
-    summary.json and table.md, and the table printed."""
-    import sys
+@dataclass(frozen=True)
+class PairedStudy:
+    """A paired study's fixed rule as data: its `arms` against `baseline`, read from the study's
+    own runs and those of the sibling study folders `also` (where the baseline's runs live)."""
 
-    folder = Path(sys.argv[1]) if len(sys.argv) > 1 else default_folder
-    res = summarise(folder / "runs")
-    (folder / "summary.json").write_text(json.dumps(res, indent=1))
-    (folder / "table.md").write_text(table(res))
-    print(table(res))
+    arms: tuple[str, ...]
+    baseline: str = "today"
+    also: tuple[str, ...] = ()
+    metric: str = "eval.per_map.*.success"
+    seeds: range = range(20)
+    margin: float = -0.10
+    """'as good' iff the 95 % BCa interval's lower end is above this."""
+    wall: str = "2-core machine, 2 runs at once"
+
+    def summarise(self, runs: Path) -> dict[str, Any]:
+        """The study's summary from its runs folder (`pages` and `cli` call it)."""
+        folders = [runs.parent, *(runs.parent.parent / name for name in self.also)]
+        return summarise(folders, self.metric, self.baseline, self.arms, self.seeds, self.margin)
+
+    def table(self, res: dict[str, Any]) -> str:
+        return table(res, self.baseline, self.wall)
+
+    def cli(self, default_folder: Path) -> None:
+        """The study's `summarise.py` as a script: STUDY_DIR (argv[1], else `default_folder`)
+        → its summary.json and table.md, and the table printed."""
+        folder = Path(sys.argv[1]) if len(sys.argv) > 1 else default_folder
+        res = self.summarise(folder / "runs")
+        (folder / "summary.json").write_text(json.dumps(res, indent=1))
+        (folder / "table.md").write_text(self.table(res))
+        print(self.table(res))

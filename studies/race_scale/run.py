@@ -1,5 +1,6 @@
 """Race: the many-runner setting (ppo-asor-scale.yaml) against today's example (ppo-asor.yaml),
-and (studies/race_scale_steps) the many-runner setting with more policy updates per env step.
+and (studies/race_scale_steps) the many-runner setting with more policy updates per env step,
+and (studies/race_scale_budget) the many-runner setting at its own 2M-env-step stop.
 
 Each run trains one YAML as written (its env runners, batch, minibatch, Learner device), seed
 `s` (the algorithm's and ASOR's), until `--steps` env steps, then evaluates its stochastic
@@ -40,6 +41,8 @@ METHODS: dict[str, tuple[Path, dict[str, int]]] = {
     # studies/race_scale_steps: the scale file with more policy updates per env step
     "rollout": (SCALE, {"train_batch_size": 3584, "minibatch_size": 896}),  # 32-step rollouts
     "epochs": (SCALE, {"minibatch_size": 1024, "num_epochs": 8}),  # 4x the gradient steps
+    # studies/race_scale_budget: the scale file as written, run to its own 2M stop (--steps)
+    "scale-2m": (SCALE, {}),
 }
 """Each method: its YAML and the `.training()` settings that replace the YAML's."""
 EVAL_EPISODES = 3
@@ -102,7 +105,7 @@ def resources(method: str, layout: str) -> dict[str, float]:
     """What one run's Ray task holds (its env runners ask for their own CPUs)."""
     if layout == "cpu":
         return {"num_cpus": 1, "num_gpus": 0}
-    return {"num_cpus": 1, "num_gpus": 1 if method == "scale" else 0}
+    return {"num_cpus": 1, "num_gpus": 1 if METHODS[method][0] == SCALE else 0}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -33,8 +33,10 @@ def test_arms_are_judged_only_with_every_seed_and_against_another_studys_baselin
     write_runs(mine, "close", {s: 0.5 + 0.05 * s - 0.01 for s in seeds})
     write_runs(mine, "bad", {s: 0.1 for s in seeds})
     write_runs(mine, "half", {s: 0.9 for s in range(3)})
-    res = paired_verdict.summarise([mine, base], "score", "today", ["close", "bad", "half"],
-                                   seeds, -0.1)  # fmt: skip
+    study = paired_verdict.PairedStudy(
+        arms=("close", "bad", "half"), also=("base_study",), metric="score", seeds=seeds
+    )
+    res = study.summarise(mine / "runs")
     arms = res["arms"]
     assert arms["close"]["verdict"] == "as good"
     assert arms["close"]["paired"]["diff_mean"] == pytest.approx(-0.01, abs=1e-9)
@@ -42,6 +44,6 @@ def test_arms_are_judged_only_with_every_seed_and_against_another_studys_baselin
     assert arms["half"]["verdict"].startswith("not yet: 3 of 6 runs")
     assert "paired" not in arms["half"]
     assert res["methods"]["today"]["runs"] == 6 and res["methods"]["bad"]["train_wall_s"] == 12.5
-    md = paired_verdict.table(res, "today", "test")
+    md = study.table(res)
     assert "Verdict for bad (README.md's rule): **worse**" in md
     assert "| close | 6 | -0.010 |" in md and "| half |" not in md.split("arm − today")[1]
