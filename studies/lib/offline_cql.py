@@ -34,7 +34,14 @@ DEFAULT_METHODS = ("cql", "srpo:mode=srpo", "asor:mode=asor")
 MARGIN = 5.0
 """A method is better (worse) than CQL if its mean paired Δ of the mean score is ≥ MARGIN
 (≤ −MARGIN) and Δ has that sign on every seed (studies/cql_hopper's rule)."""
-ASOR_BASE = {"preset": "paper", "lambda_": 0.1, "rho_value": 0.5, "rho_count": 0.5, "proxy": "rnd", "reward_form": "log"}
+ASOR_BASE = {
+    "preset": "paper",
+    "lambda_": 0.1,
+    "rho_value": 0.5,
+    "rho_count": 0.5,
+    "proxy": "rnd",
+    "reward_form": "log",
+}
 """The offline tuned examples' ASOR block (λ 0.1: SRPO's fixed value)."""
 
 
@@ -142,7 +149,11 @@ def summarize(out: Path) -> str:
         deltas = [_score(mine[s]) - _score(base[s]) for s in seeds]
         per = ", ".join(f"seed {s}: {d:+.1f}" for s, d in zip(seeds, deltas, strict=True))
         verdict = paired_verdict(deltas)
-        table[f"{quality}/{method}"]["minus_cql"] = {"seeds": seeds, "deltas": deltas, "verdict": verdict}
+        table[f"{quality}/{method}"]["minus_cql"] = {
+            "seeds": seeds,
+            "deltas": deltas,
+            "verdict": verdict,
+        }
         lines.append(f"\n{quality}: {method} − cql (mean score, paired by seed): mean "
                      f"{np.mean(deltas):+.1f} ({per}): {verdict}.")  # fmt: skip
     md = "\n".join(lines) + "\n"
