@@ -4,8 +4,8 @@ coverage rule on seeds 6–8 and the data whose target part covers the source's 
 
     .venv/bin/python studies/dara_check/summarise.py [RUNS_DIR]
 
-Reads the run files of RUNS_DIR (default: runs/ beside this file); `make results` writes table.md and
-summary.json from it (studies/lib/pages.py, runner "script").
+Reads the run files of RUNS_DIR (default: runs/ beside this file); `make results` writes
+table.md and summary.json from it (studies/lib/pages.py, runner "script").
 """
 
 from __future__ import annotations

@@ -4,7 +4,8 @@ verdict of the rule fixed in studies/escp_walker/README.md.
 
     .venv/bin/python studies/escp_walker/summarise.py [STUDY_DIR]
 
-Reads the run files of STUDY_DIR/runs/ (default: this folder) and writes table.md and summary.json there.
+Reads the run files of STUDY_DIR/runs/ (default: this folder) and writes table.md and
+summary.json there.
 """
 
 from __future__ import annotations

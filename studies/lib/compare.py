@@ -11,10 +11,10 @@ difference and a one-sided Wilcoxon signed-rank p. Our benchmarks give a seed th
 initial weights and the same stream of env dynamics for every method, so where that shared
 luck matters (Hopper: same-seed returns correlate at ~0.5) pairing narrows the interval.
 
-Reads every run file of DIR/runs/ (`studies.lib.run_files`; fields "method", "seed" and the metric). `--metric` is a dotted
-path into a run file; a `*` part averages over all keys at that level, e.g. the race success
-rate (mean over the ten maps): `--metric 'eval.per_map.*.success'`. Booleans count as 0/1
-(`--metric escaped_trap`).
+Reads every run file of DIR/runs/ (`studies.lib.run_files`; fields "method", "seed" and the
+metric). `--metric` is a dotted path into a run file; a `*` part averages over all keys at
+that level, e.g. the race success rate (mean over the ten maps):
+`--metric 'eval.per_map.*.success'`. Booleans count as 0/1 (`--metric escaped_trap`).
 """
 
 from __future__ import annotations

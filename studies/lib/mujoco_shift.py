@@ -21,8 +21,9 @@ spelled its settings out:
         asor:preset=paper,mode=asor,lambda_=0.05,rho_value=0.5,rho_count=0.5,proxy=rnd,reward_form=log
 
 Each run is written to OUT/runs/<task>-<method>-<seed>.json.gz (SAC, the old names) or
-OUT/runs/<task>-ppo-<method>-<seed>.json.gz (PPO; `studies.lib.run_files`) as soon as it ends (a rerun skips finished runs);
-`--summarize-only` rebuilds OUT/table.md and OUT/summary.json from them, one table per algo.
+OUT/runs/<task>-ppo-<method>-<seed>.json.gz (PPO; `studies.lib.run_files`) as soon as it ends
+(a rerun skips finished runs); `--summarize-only` rebuilds OUT/table.md and OUT/summary.json
+from them, one table per algo.
 A run file holds `eval` (per dynamics), `eval_return_mean` (mean return over the three),
 `curve` ([env steps, training episode return] per iteration) and `asor_last` (the last
 iteration's `result["asor"]`). studies.lib.compare reads (method, seed) only, so give each algo

@@ -12,11 +12,11 @@ privileged, the expert) and a uniformly random policy.
 Methods are named as in `studies.lib.lava_reproduction` (`name:key=value,...` over AsorConfig
 fields; `ppo` = no ASOR). ASOR and SRPO see `RACE_ASOR_OBS_KEYS` unless `obs_keys` is given.
 Seeds are `--first-seed` .. `--first-seed + --seeds - 1`. Each run is written to
-OUT/runs/<method>-<seed>.json.gz (`studies.lib.run_files`) as soon as it finishes; existing run files are kept (a rerun
-only adds what is missing; one with another `--sampling` or `--model-config` than a kept run
-recorded is refused); the success rate is `eval.per_map.<map>.success` in them
-(`python -m studies.lib.compare --metric 'eval.per_map.*.success'` averages over the maps);
-`--summarize-only` rebuilds the tables.
+OUT/runs/<method>-<seed>.json.gz (`studies.lib.run_files`) as soon as it finishes; existing
+run files are kept (a rerun only adds what is missing; one with another `--sampling` or
+`--model-config` than a kept run recorded is refused); the success rate is
+`eval.per_map.<map>.success` in them (`python -m studies.lib.compare --metric
+'eval.per_map.*.success'` averages over the maps); `--summarize-only` rebuilds the tables.
 """
 
 from __future__ import annotations

@@ -56,9 +56,16 @@ def write_run(path: Path, record: dict[str, Any]) -> None:
     if not path.name.endswith(SUFFIX):
         raise ValueError(f"{path}: a run file is written as <name>{SUFFIX}")
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(record, separators=(",", ":")).encode()
+    _gzip_into(path, json.dumps(record, separators=(",", ":")).encode())
+
+
+def _gzip_into(path: Path, text: bytes) -> None:
+    """TEXT gzipped (no time in the header) into PATH through a temporary file, replaced only
+    once the temporary file decompresses to TEXT."""
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_bytes(gzip.compress(text, compresslevel=9, mtime=0))
+    if gzip.decompress(tmp.read_bytes()) != text:
+        raise SystemExit(f"{path}: the compressed copy differs; nothing replaced")
     os.replace(tmp, path)
 
 
@@ -90,12 +97,7 @@ def compress(folder: Path) -> list[Path]:
     written = []
     for old in sorted(Path(folder).rglob("runs/*" + LEGACY_SUFFIX)):
         new = old.with_name(run_name(old) + SUFFIX)
-        text = old.read_bytes()
-        tmp = new.with_name(new.name + ".tmp")
-        tmp.write_bytes(gzip.compress(text, compresslevel=9, mtime=0))
-        if gzip.decompress(tmp.read_bytes()) != text:
-            raise SystemExit(f"{old}: the compressed copy differs; nothing replaced")
-        os.replace(tmp, new)
+        _gzip_into(new, old.read_bytes())
         old.unlink()
         written.append(new)
     return written
