@@ -296,6 +296,8 @@ def test_only_a_flat_unmasked_batch_of_the_policys_own_rows_ranks_a_random_subse
     subset = connector._rank_subset(pb, n, None, None, k, rng)
     assert subset is not None and subset.tolist() == sorted(set(subset.tolist()))
     assert len(subset) == k and 0 <= int(subset.min()) and int(subset.max()) < n
+    # the smallest subset is one row
+    assert connector._rank_subset(pb, n, None, None, 1, rng).shape == (1,)
     # every row is ranked: a loss mask (padded sequences), an adapter's own ranked columns,
     # no generator, no subset size, a subset as large as the batch, or an empty one
     for mask, ranked, rows, gen in [
