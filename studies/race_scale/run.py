@@ -5,9 +5,11 @@ and (studies/race_scale_budget) the many-runner setting at its own 2M-env-step s
 Each run trains one YAML as written (its env runners, batch, minibatch, Learner device), seed
 `s` (the algorithm's and ASOR's), until `--steps` env steps, then evaluates its stochastic
 policy on 3 unseen courses per map (`rllib_asor.race.evaluation`, as studies/race_250k) and
-writes OUT/runs/<method>-<seed>.json.gz (`eval.per_map.*.success` is the rule's metric). A rerun
-skips the runs that exist; an unfinished run starts again. Runs go to Ray as tasks, as many at
-once as the node's CPUs and GPUs allow (a scale run needs 16 CPUs and the GPU).
+writes OUT/runs/<method>-<seed>.json.gz (`eval.per_map.*.success` is the rule's metric; `curve`
+and, since studies/race_scale_decline, `trace` hold each iteration's training success and
+learning statistics). A rerun skips the runs that exist; an unfinished run starts again. Runs
+go to Ray as tasks, as many at once as the node's CPUs and GPUs allow (a scale run needs 16
+CPUs and the GPU).
 
     python studies/race_scale/run.py --seeds 20 --steps 500000 --layout cpu --out studies/race_scale
     python studies/race_scale/run.py --methods rollout epochs --seeds 20 --steps 500000 \
@@ -22,6 +24,7 @@ total number of envs (the same rollouts, batch, minibatch and epochs), one CPU p
 from __future__ import annotations
 
 import argparse
+import numbers
 import os
 import sys
 import time
@@ -69,6 +72,24 @@ def build_config(method: str, seed: int, steps: int, layout: str) -> Any:
     return rllib_asor.with_asor(config, **{**(exp.asor or {}), "seed": seed})
 
 
+TRACED = ("learners/default_policy", "learners/asor_disc.default_policy", "race")
+"""Result sections kept per iteration in a run's `trace` (the policy's and ASOR's learning
+statistics, the race's training metrics): what a run's learning curve is read against."""
+
+
+def traced(result: dict[str, Any]) -> dict[str, float]:
+    """The numbers of `result`'s TRACED sections, flat ("race/success_rate": 0.5)."""
+    out = {}
+    for section in TRACED:
+        node: Any = result
+        for key in section.split("/"):
+            node = node.get(key) if isinstance(node, dict) else None
+        for key, value in (node if isinstance(node, dict) else {}).items():
+            if isinstance(value, numbers.Real) and not isinstance(value, bool):
+                out[f"{section}/{key}"] = float(value)
+    return out
+
+
 def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     """Train one (method, seed) to the budget, evaluate, return the run record."""
     import torch
@@ -80,12 +101,13 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     torch.set_num_threads(1)
     register_race_envs()
     algo = build_config(spec["method"], spec["seed"], spec["steps"], spec["layout"]).build_algo()
-    curve, steps, t0 = [], 0, time.time()
+    curve, trace, steps, t0 = [], [], 0, time.time()
     while steps < spec["steps"]:
         result = algo.train()
         steps = int(result["num_env_steps_sampled_lifetime"])
         race = result.get("race", {})
         curve.append([steps, race.get("success_rate", float("nan")), time.time() - t0])
+        trace.append(traced(result))
     train_s = time.time() - t0
     ev = evaluate(module_policy(algo.get_module(), explore=True), EVAL_EPISODES, MAX_EPISODE_STEPS)
     algo.stop()
@@ -98,6 +120,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "train_wall_s": train_s,
         "eval": ev,
         "curve": curve,
+        "trace": trace,
     }
 
 
