@@ -101,7 +101,7 @@ results: $(STAMP)
 # Mutation testing (docs/testing.md; not part of `make test`): one mutmut run per package of
 # benchmarks/mutation/packages.toml, under nice, in build/mutation/<package>/. Long on 2 cores:
 # pick packages with MUTATION_PACKAGES="asor legacy"; MUTATION_ARGS="--rerun-open" retests only
-# the last run's survivors (after new tests), "--report" only prints the kill ratios.
+# the last run's survivors and timeouts (after new tests), "--report" only prints the kill ratios.
 MUTMUT_VERSION      ?= 3.8.1
 MUTATION_PACKAGES   ?=
 MUTATION_ARGS       ?= --check

@@ -43,7 +43,10 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 BUILD = ROOT / "build" / "mutation"
 
-KILLED = {1, 3, 36, -24, 24, 152, 255}  # failed tests, pytest internal error, timeouts
+# mutmut's CPU or wall-clock limit: a mutant that hangs, or one slowed by a busy machine (the
+# wall-clock limit is short for slow tests: it is set from the tests' own durations)
+TIMEOUTS = {-24, 24, 152}
+KILLED = {1, 3, 36, 255} | TIMEOUTS  # failed tests, pytest internal error, timeouts
 SURVIVED = {0}
 NO_TESTS = {5, 33}
 SKIPPED = {34}
@@ -240,6 +243,12 @@ def forget_verdicts(dest: Path, mutants: set[str]) -> None:
     _set_verdicts(dest, lambda k, _: k in mutants, None)
 
 
+def forget_timeouts(dest: Path) -> None:
+    """Mark every timed-out mutant untested, so that the next run tests it again (on an idle
+    machine a timeout is a hang; on a busy one it may be a slow pass)."""
+    _set_verdicts(dest, lambda _, v: v in TIMEOUTS, None)
+
+
 def skip_unselected(dest: Path, patterns: list[str]) -> None:
     """Mark the untested mutants outside the package's `mutants` patterns skipped, so that a
     run without names tests only the selected ones (mutmut re-tests every mutant it is given
@@ -264,8 +273,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--rerun-open",
         action="store_true",
-        help="test the last run's open survivors again (after new tests); untested mutants "
-        "are always tested",
+        help="test the last run's open survivors and timeouts again (after new tests, or after "
+        "a run beside other work); untested mutants are always tested",
     )
     args = ap.parse_args(argv)
     names = args.packages or list(packages)
@@ -290,6 +299,7 @@ def main(argv: list[str] | None = None) -> int:
                 if args.rerun_open:
                     last = summarise(name, dest, pkg, equivalent.get(name, {}))
                     forget_verdicts(dest, set(last["open_survivors"]))
+                    forget_timeouts(dest)
                     # mutmut re-collects which tests run which function only for new tests:
                     # a function new to the source (or newly mutated) keeps "no tests" until
                     # the stats are collected again in full (one run of the selected tests)

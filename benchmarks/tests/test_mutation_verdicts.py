@@ -63,3 +63,17 @@ def test_a_record_of_another_package_is_refused(tmp_path: Path) -> None:
     (records / "glue.json").rename(records / "asor.json")
     with pytest.raises(ValueError, match="'glue', not 'asor'"):
         verdicts.restore("asor", tmp_path / "new", records)
+
+
+def test_a_rerun_forgets_timeouts_and_keeps_every_other_verdict(tmp_path: Path) -> None:
+    build = build_with_meta(tmp_path)
+    meta = build / "mutants" / "pkg" / "mod.py.meta"
+    data = json.loads(meta.read_text())
+    data["exit_code_by_key"]["pkg.mod.x_g__mutmut_1"] = -24  # mutmut's limit: a timeout
+    meta.write_text(json.dumps(data))
+    pkg = {"only_mutate": ["pkg/*.py"]}
+    assert run.summarise("glue", build, pkg, {})["killed"] == 2  # a timeout counts as killed
+    run.forget_timeouts(build)
+    codes = json.loads(meta.read_text())["exit_code_by_key"]
+    assert codes == {"pkg.mod.x_f__mutmut_1": 1, "pkg.mod.x_f__mutmut_2": 0,
+                     "pkg.mod.x_g__mutmut_1": None}  # fmt: skip
