@@ -147,6 +147,7 @@ def write_config(dest: Path, defaults: dict, pkg: dict) -> None:
             f"pytest_add_cli_args_test_selection = {_toml_list(pkg['tests'])}",
             f"pytest_add_cli_args = {_toml_list(['-p', 'no:randomly', '-q'])}",
             f"do_not_mutate_patterns = {_toml_list(skip)}",
+            f"timeout_constant = {float(pkg.get('timeout_constant', defaults['timeout_constant']))}",
             "",
         ]
     )

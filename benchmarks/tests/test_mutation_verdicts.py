@@ -77,3 +77,14 @@ def test_a_rerun_forgets_timeouts_and_keeps_every_other_verdict(tmp_path: Path) 
     codes = json.loads(meta.read_text())["exit_code_by_key"]
     assert codes == {"pkg.mod.x_f__mutmut_1": 1, "pkg.mod.x_f__mutmut_2": 0,
                      "pkg.mod.x_g__mutmut_1": None}  # fmt: skip
+
+
+def test_the_sandbox_config_carries_the_timeout_constant(tmp_path: Path) -> None:
+    import tomllib
+
+    defaults, packages = run.load_packages()
+    run.write_config(tmp_path, defaults, packages["glue"])
+    mutmut = tomllib.loads((tmp_path / "pyproject.toml").read_text())["tool"]["mutmut"]
+    assert mutmut["timeout_constant"] == defaults["timeout_constant"] > 1.0  # mutmut's own: 1
+    run.write_config(tmp_path, defaults, {**packages["glue"], "timeout_constant": 12})
+    assert "timeout_constant = 12.0" in (tmp_path / "pyproject.toml").read_text()
