@@ -1,6 +1,7 @@
 """Race: the many-runner setting (ppo-asor-scale.yaml) against today's example (ppo-asor.yaml),
 and (studies/race_scale_steps) the many-runner setting with more policy updates per env step,
-and (studies/race_scale_budget) the many-runner setting at its own 2M-env-step stop.
+and (studies/race_scale_budget) the many-runner setting at its own 2M-env-step stop, and
+(studies/race_scale_decline) that setting with one thing changed mid-run (SWITCHES).
 
 Each run trains one YAML as written (its env runners, batch, minibatch, Learner device), seed
 `s` (the algorithm's and ASOR's), until `--steps` env steps, then evaluates its stochastic
@@ -46,8 +47,38 @@ METHODS: dict[str, tuple[Path, dict[str, int]]] = {
     "epochs": (SCALE, {"minibatch_size": 1024, "num_epochs": 8}),  # 4x the gradient steps
     # studies/race_scale_budget: the scale file as written, run to its own 2M stop (--steps)
     "scale-2m": (SCALE, {}),
+    # studies/race_scale_decline: the scale file as written, one thing changed mid-run (SWITCHES)
+    "scale-2m-asor-off": (SCALE, {}),
+    "scale-2m-lr-low": (SCALE, {}),
 }
 """Each method: its YAML and the `.training()` settings that replace the YAML's."""
+SWITCH_AT = 450_000
+"""Env steps after which a SWITCHES method changes its one thing (a `--layout cpu` run is
+deterministic, so up to here it is the same run as `scale-2m` of the same seed)."""
+LOW_LR = 3e-4
+
+
+def _asor_off(learner: Any) -> None:
+    """λ = 0 from now on: ASOR's networks still train, its bonus is 0."""
+    piece = learner._asor_piece
+    piece.asor = piece.asor.model_copy(update={"lambda_": 0.0})
+    for module_id in piece.module_ids.values():
+        learner.module[module_id].unwrapped().trainer.cfg = piece.asor
+
+
+def _lr_low(learner: Any) -> None:
+    """The policy's learning rate fixed at LOW_LR (ppo-asor.yaml's end value) from now on."""
+    from ray.rllib.utils.schedules.scheduler import Scheduler
+
+    for optimizer in list(learner._optimizer_lr_schedules):
+        learner._optimizer_lr_schedules[optimizer] = Scheduler(
+            fixed_value_or_schedule=LOW_LR, framework="torch", device=learner._device
+        )
+
+
+SWITCHES = {"scale-2m-asor-off": _asor_off, "scale-2m-lr-low": _lr_low}
+"""Method → what changes in its Learner once SWITCH_AT env steps are sampled (study-only
+surgery on RLlib's and ASOR's private attributes, to test a cause from the same state)."""
 EVAL_EPISODES = 3
 MAX_EPISODE_STEPS = 1000
 
@@ -101,13 +132,16 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     torch.set_num_threads(1)
     register_race_envs()
     algo = build_config(spec["method"], spec["seed"], spec["steps"], spec["layout"]).build_algo()
-    curve, trace, steps, t0 = [], [], 0, time.time()
+    curve, trace, steps, switched, t0 = [], [], 0, False, time.time()
     while steps < spec["steps"]:
         result = algo.train()
         steps = int(result["num_env_steps_sampled_lifetime"])
         race = result.get("race", {})
         curve.append([steps, race.get("success_rate", float("nan")), time.time() - t0])
         trace.append(traced(result))
+        if spec["method"] in SWITCHES and steps >= SWITCH_AT and not switched:
+            algo.learner_group.foreach_learner(SWITCHES[spec["method"]])
+            switched = True
     train_s = time.time() - t0
     ev = evaluate(module_policy(algo.get_module(), explore=True), EVAL_EPISODES, MAX_EPISODE_STEPS)
     algo.stop()

@@ -42,9 +42,9 @@ def _mean(values: list[float]) -> float | None:
 
 
 def reproduced(run: dict[str, Any]) -> dict[str, Any] | None:
-    """How the rerun's training success matches the stored run of its seed, over the rerun's
-    iterations (None: no stored run of that seed)."""
-    path = existing(run_file(STORED, f"{run['method']}-{run['seed']}"))
+    """How the rerun's training success matches the stored `scale-2m` run of its seed, over the
+    rerun's iterations (a switched method: the same up to its switch); None: no stored run."""
+    path = existing(run_file(STORED, f"scale-2m-{run['seed']}"))
     if path is None:
         return None
     stored = {int(step): success for step, success, _ in read_run(path)["curve"]}
@@ -89,7 +89,7 @@ def table(res: dict[str, Any]) -> str:
             "no stored run of this seed"
             if rep is None
             else f"{rep['identical']} of {rep['iterations']} iterations' training success "
-            f"identical to race_scale_budget's run (first difference: "
+            f"identical to race_scale_budget's scale-2m run (first difference: "
             f"{'none' if rep['first_difference'] is None else 'iteration ' + str(rep['first_difference'])})"
         )
         head = "| env steps | " + " | ".join(READING) + " |"
