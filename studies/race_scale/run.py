@@ -132,16 +132,16 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     torch.set_num_threads(1)
     register_race_envs()
     algo = build_config(spec["method"], spec["seed"], spec["steps"], spec["layout"]).build_algo()
-    curve, trace, steps, switched, t0 = [], [], 0, False, time.time()
+    curve, trace, steps, switched_at, t0 = [], [], 0, None, time.time()
     while steps < spec["steps"]:
         result = algo.train()
         steps = int(result["num_env_steps_sampled_lifetime"])
         race = result.get("race", {})
         curve.append([steps, race.get("success_rate", float("nan")), time.time() - t0])
         trace.append(traced(result))
-        if spec["method"] in SWITCHES and steps >= SWITCH_AT and not switched:
+        if spec["method"] in SWITCHES and steps >= SWITCH_AT and switched_at is None:
             algo.learner_group.foreach_learner(SWITCHES[spec["method"]])
-            switched = True
+            switched_at = steps
     train_s = time.time() - t0
     ev = evaluate(module_policy(algo.get_module(), explore=True), EVAL_EPISODES, MAX_EPISODE_STEPS)
     algo.stop()
@@ -155,6 +155,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "eval": ev,
         "curve": curve,
         "trace": trace,
+        **({"switched_at": switched_at} if spec["method"] in SWITCHES else {}),
     }
 
 
