@@ -50,11 +50,9 @@ METHODS: dict[str, tuple[Path, dict[str, int]]] = {
     # studies/race_scale_decline: the scale file as written, one thing changed mid-run (SWITCHES)
     "scale-2m-asor-off": (SCALE, {}),
     "scale-2m-lr-low": (SCALE, {}),
+    "scale-2m-asor-never": (SCALE, {}),
 }
 """Each method: its YAML and the `.training()` settings that replace the YAML's."""
-SWITCH_AT = 450_000
-"""Env steps after which a SWITCHES method changes its one thing (a `--layout cpu` run is
-deterministic, so up to here it is the same run as `scale-2m` of the same seed)."""
 LOW_LR = 3e-4
 
 
@@ -76,9 +74,17 @@ def _lr_low(learner: Any) -> None:
         )
 
 
-SWITCHES = {"scale-2m-asor-off": _asor_off, "scale-2m-lr-low": _lr_low}
-"""Method → what changes in its Learner once SWITCH_AT env steps are sampled (study-only
-surgery on RLlib's and ASOR's private attributes, to test a cause from the same state)."""
+SWITCHES = {
+    "scale-2m-asor-off": (450_000, _asor_off),
+    "scale-2m-lr-low": (450_000, _lr_low),
+    # after the first iteration: λ is still 0 there (ASOR's warm-up), so the run is
+    # `scale-2m`'s until the bonus would first act
+    "scale-2m-asor-never": (0, _asor_off),
+}
+"""Method → (env steps, what changes in its Learner after the first iteration that reaches
+them). A `--layout cpu` run is deterministic, so up to there it is the same run as `scale-2m`
+of the same seed (study-only surgery on RLlib's and ASOR's private attributes, to test a cause
+from the same state)."""
 EVAL_EPISODES = 3
 MAX_EPISODE_STEPS = 1000
 
@@ -139,8 +145,9 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         race = result.get("race", {})
         curve.append([steps, race.get("success_rate", float("nan")), time.time() - t0])
         trace.append(traced(result))
-        if spec["method"] in SWITCHES and steps >= SWITCH_AT and switched_at is None:
-            algo.learner_group.foreach_learner(SWITCHES[spec["method"]])
+        at, switch = SWITCHES.get(spec["method"], (None, None))
+        if switch is not None and steps >= at and switched_at is None:
+            algo.learner_group.foreach_learner(switch)
             switched_at = steps
     train_s = time.time() - t0
     ev = evaluate(module_policy(algo.get_module(), explore=True), EVAL_EPISODES, MAX_EPISODE_STEPS)
