@@ -27,7 +27,21 @@ __all__ = [
     "save_partial",
     "start_local_ray",
     "write_json",
+    "write_summary",
 ]
+
+
+def write_summary(
+    folder: Path,
+    summarise: Callable[[Path], dict[str, Any]],
+    table: Callable[[dict[str, Any]], str],
+) -> str:
+    """A study's small results from FOLDER/runs: `summarise(runs)` into FOLDER/summary.json
+    and `table(summary)` into FOLDER/table.md; returns the table."""
+    res = summarise(folder / "runs")
+    (folder / "summary.json").write_text(json.dumps(res, indent=1))
+    (folder / "table.md").write_text(md := table(res))
+    return md
 
 
 def round_floats(value: Any, digits: int = 6) -> Any:

@@ -38,6 +38,7 @@ import numpy as np
 
 from rllib_asor.report.paired import other_intervals
 from studies.lib import compare as cmp
+from studies.lib.common import write_summary
 
 ROOT = Path(__file__).resolve().parents[2]
 STUDIES = ROOT / "studies"
@@ -80,11 +81,7 @@ def runner_table(folder: Path, spec: dict[str, Any]) -> str:
         module_spec = importlib.util.spec_from_file_location(f"{folder.name}_summarise", path)
         module = importlib.util.module_from_spec(module_spec)
         module_spec.loader.exec_module(module)
-        res = module.summarise(folder / "runs")
-        md = module.table(res)
-        (folder / "summary.json").write_text(json.dumps(res, indent=1))
-        (folder / "table.md").write_text(md)
-        return md
+        return write_summary(folder, module.summarise, module.table)
     if kind == "race_speed":
         return race_speed_table(folder / spec.get("file", "race_speed.json"), spec)
     raise ValueError(f"{folder / 'study.toml'}: table.runner={kind!r}; allowed: lava, race, "

@@ -5,7 +5,6 @@ race_scale_steps, race_scale_budget)."""
 
 from __future__ import annotations
 
-import json
 import statistics
 import sys
 from collections.abc import Sequence
@@ -14,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from rllib_asor.report.paired import paired_difference
+from studies.lib.common import write_summary
 from studies.lib.compare import load_metric_by_seed
 from studies.lib.run_files import read_runs
 
@@ -132,7 +132,4 @@ class PairedStudy:
         """The study's `summarise.py` as a script: STUDY_DIR (argv[1], else `default_folder`)
         → its summary.json and table.md, and the table printed."""
         folder = Path(sys.argv[1]) if len(sys.argv) > 1 else default_folder
-        res = self.summarise(folder / "runs")
-        (folder / "summary.json").write_text(json.dumps(res, indent=1))
-        (folder / "table.md").write_text(self.table(res))
-        print(self.table(res))
+        print(write_summary(folder, self.summarise, self.table))

@@ -138,6 +138,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
     torch.set_num_threads(1)
     register_race_envs()
     algo = build_config(spec["method"], spec["seed"], spec["steps"], spec["layout"]).build_algo()
+    at, switch = SWITCHES.get(spec["method"], (None, None))
     curve, trace, steps, switched_at, t0 = [], [], 0, None, time.time()
     while steps < spec["steps"]:
         result = algo.train()
@@ -145,7 +146,6 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         race = result.get("race", {})
         curve.append([steps, race.get("success_rate", float("nan")), time.time() - t0])
         trace.append(traced(result))
-        at, switch = SWITCHES.get(spec["method"], (None, None))
         if switch is not None and steps >= at and switched_at is None:
             algo.learner_group.foreach_learner(switch)
             switched_at = steps
@@ -162,7 +162,7 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "eval": ev,
         "curve": curve,
         "trace": trace,
-        **({"switched_at": switched_at} if spec["method"] in SWITCHES else {}),
+        **({"switched_at": switched_at} if switch is not None else {}),
     }
 
 

@@ -8,12 +8,12 @@ Writes table.md and summary.json in STUDY_DIR (default: this folder).
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 from typing import Any
 
+from studies.lib.common import write_summary
 from studies.lib.run_files import existing, read_run, read_runs, run_file
 
 STORED = Path(__file__).resolve().parents[1] / "race_scale_budget" / "runs"
@@ -41,6 +41,11 @@ def _mean(values: list[float]) -> float | None:
     return sum(finite) / len(finite) if finite else None
 
 
+def _same(a: float, b: float | None) -> bool:
+    """Equal training success, NaN (no race ended in the iteration) matching NaN."""
+    return a == b or (b is not None and math.isnan(a) and math.isnan(b))
+
+
 def reproduced(run: dict[str, Any]) -> dict[str, Any] | None:
     """How the rerun's training success matches the stored `scale-2m` run of its seed, over the
     rerun's iterations (a switched method: the same up to its switch); None: no stored run."""
@@ -48,11 +53,7 @@ def reproduced(run: dict[str, Any]) -> dict[str, Any] | None:
     if path is None:
         return None
     stored = {int(step): success for step, success, _ in read_run(path)["curve"]}
-    # NaN (no race ended in the iteration) matches NaN
-    same = [
-        s == stored.get(int(step)) or (math.isnan(s) and math.isnan(stored.get(int(step), 0.0)))
-        for step, s, _ in run["curve"]
-    ]
+    same = [_same(s, stored.get(int(step))) for step, s, _ in run["curve"]]
     first = same.index(False) if False in same else None
     return {"iterations": len(same), "identical": sum(same), "first_difference": first}
 
@@ -107,7 +108,4 @@ def table(res: dict[str, Any]) -> str:
 
 if __name__ == "__main__":
     folder = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parent
-    res = summarise(folder / "runs")
-    (folder / "summary.json").write_text(json.dumps(res, indent=1))
-    (folder / "table.md").write_text(md := table(res))
-    print(md)
+    print(write_summary(folder, summarise, table))
