@@ -51,6 +51,8 @@ METHODS: dict[str, tuple[Path, dict[str, int]]] = {
     "scale-2m-asor-off": (SCALE, {}),
     "scale-2m-lr-low": (SCALE, {}),
     "scale-2m-asor-never": (SCALE, {}),
+    # studies/race_scale_2m: today's file as written, run to its own 2M stop (--steps)
+    "today-2m": (TODAY, {}),
 }
 """Each method: its YAML and the `.training()` settings that replace the YAML's."""
 LOW_LR = 3e-4
@@ -109,6 +111,9 @@ def build_config(method: str, seed: int, steps: int, layout: str) -> Any:
     return rllib_asor.with_asor(config, **{**(exp.asor or {}), "seed": seed})
 
 
+TRACE_EVERY = 14_336
+"""A trace row is kept once at least this many env steps passed since the last one (one scale
+iteration): every iteration of the scale file, every 14th of today's 1,024-step ones."""
 TRACED = ("learners/default_policy", "learners/asor_disc.default_policy", "race")
 """Result sections kept per iteration in a run's `trace` (the policy's and ASOR's learning
 statistics, the race's training metrics): what a run's learning curve is read against."""
@@ -125,6 +130,11 @@ def traced(result: dict[str, Any]) -> dict[str, float]:
             if isinstance(value, numbers.Real) and not isinstance(value, bool):
                 out[f"{section}/{key}"] = float(value)
     return out
+
+
+def trace_due(steps: int, trace: list[dict[str, float]]) -> bool:
+    """Whether the iteration that ended at `steps` env steps gets a trace row (TRACE_EVERY)."""
+    return not trace or steps - trace[-1].get("env_steps", 0) >= TRACE_EVERY
 
 
 def run_one(spec: dict[str, Any]) -> dict[str, Any]:
@@ -145,7 +155,8 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         steps = int(result["num_env_steps_sampled_lifetime"])
         race = result.get("race", {})
         curve.append([steps, race.get("success_rate", float("nan")), time.time() - t0])
-        trace.append(traced(result))
+        if trace_due(steps, trace):
+            trace.append({"env_steps": steps, **traced(result)})
         if switch is not None and steps >= at and switched_at is None:
             algo.learner_group.foreach_learner(switch)
             switched_at = steps
@@ -179,6 +190,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument(
+        "--seed-list", type=int, nargs="+", help="these seeds, in this order (instead of --seeds)"
+    )
     parser.add_argument("--steps", type=int, default=500_000, help="env-step budget per run")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     parser.add_argument("--layout", choices=["asis", "cpu"], default="asis")
@@ -189,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
     runs = Path(args.out).resolve() / "runs"
     runs.mkdir(parents=True, exist_ok=True)
     specs = []
-    for seed in range(args.first_seed, args.first_seed + args.seeds):
+    seeds = args.seed_list or range(args.first_seed, args.first_seed + args.seeds)
+    for seed in seeds:
         for method in args.methods:
             path = existing(run_file(runs, f"{method}-{seed}"))
             if path:

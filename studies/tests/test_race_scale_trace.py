@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from studies.race_scale.run import traced
+from studies.race_scale.run import TRACE_EVERY, trace_due, traced
 
 
 def test_trace_keeps_the_numbers_of_the_policy_asor_and_race_sections_only() -> None:
@@ -29,3 +29,14 @@ def test_trace_keeps_the_numbers_of_the_policy_asor_and_race_sections_only() -> 
 
 def test_a_result_without_those_sections_traces_nothing() -> None:
     assert traced({"learners": {"default_policy": 1.0}, "race": None}) == {}
+
+
+def test_a_trace_row_is_kept_once_per_scale_iteration_of_env_steps() -> None:
+    trace: list[dict[str, float]] = []
+    kept = []
+    for steps in range(1024, 40_000, 1024):  # today's 1,024-step iterations
+        if trace_due(steps, trace):
+            trace.append({"env_steps": steps})
+            kept.append(steps)
+    assert kept == [1024, 1024 + TRACE_EVERY, 1024 + 2 * TRACE_EVERY]
+    assert all(trace_due(s, [{"env_steps": s - TRACE_EVERY}]) for s in (TRACE_EVERY, 50_000))
