@@ -68,9 +68,10 @@ def summarise(
                 "verdict": verdict(p.ci_low, p.ci_high, margin, len(seeds)),
             }
         else:
-            done = len(set(mine) & set(seeds))
+            have = {m: len(set(v) & set(seeds)) for m, v in ((arm, mine), (baseline, base))}
+            runs = ", ".join(f"{m} {n} of {len(seeds)}" for m, n in have.items())
             out["arms"][arm] = {
-                "verdict": f"not yet: {done} of {len(seeds)} runs (the rule decides once all exist)"
+                "verdict": f"not yet: {runs} runs (the rule decides once all exist)"
             }
     return out
 

@@ -41,9 +41,18 @@ def test_arms_are_judged_only_with_every_seed_and_against_another_studys_baselin
     assert arms["close"]["verdict"] == "as good"
     assert arms["close"]["paired"]["diff_mean"] == pytest.approx(-0.01, abs=1e-9)
     assert arms["bad"]["verdict"] == "worse"
-    assert arms["half"]["verdict"].startswith("not yet: 3 of 6 runs")
+    assert arms["half"]["verdict"].startswith("not yet: half 3 of 6, today 6 of 6 runs")
     assert "paired" not in arms["half"]
     assert res["methods"]["today"]["runs"] == 6 and res["methods"]["bad"]["train_wall_s"] == 12.5
     md = study.table(res)
     assert "Verdict for bad (README.md's rule): **worse**" in md
     assert "| close | 6 | -0.010 |" in md and "| half |" not in md.split("arm − today")[1]
+
+
+def test_a_missing_baseline_is_named_in_the_wait(tmp_path: Path) -> None:
+    write_runs(tmp_path / "study", "arm", {s: 0.5 for s in range(4)})
+    study = paired_verdict.PairedStudy(
+        arms=("arm",), baseline="base", metric="score", seeds=range(4)
+    )
+    res = study.summarise(tmp_path / "study" / "runs")
+    assert res["arms"]["arm"]["verdict"].startswith("not yet: arm 4 of 4, base 0 of 4 runs")
