@@ -36,7 +36,7 @@ Helpers for benchmarks/reports: `LavaWorldEnv.cells`, `LavaWorldEnv.observation_
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from functools import cache
 from typing import Any
 
@@ -205,6 +205,24 @@ def best_reactive_policy(
 ) -> dict[tuple[int, int, bool], int]:
     """The policy behind `best_reactive_returns`: (row, col, flag) -> action, visited obs only."""
     return dict(_best_reactive(_check_layout(layout), tuple(lava_rows), int(max_steps))[1])
+
+
+def reactive_expert(layout: str = "B", obs_mode: str = "onehot") -> Callable[[np.ndarray], int]:
+    """`best_reactive_policy` as a policy on this env's observations (`obs_mode`): obs →
+    action, e.g. to record an expert's demonstrations for the imitation-from-observation
+    baselines. An observation the policy never visits gets action 1 (one column right)."""
+    policy = best_reactive_policy(layout)
+    if obs_mode not in OBS_MODES:
+        raise ValueError(f"obs_mode={obs_mode!r} is not allowed; expected one of {OBS_MODES}")
+
+    def act(obs: np.ndarray) -> int:
+        if obs_mode == "onehot":
+            row, col = int(np.argmax(obs[:GRID_SIZE])), int(np.argmax(obs[GRID_SIZE:-1]))
+        else:
+            row, col = int(obs[0]), int(obs[1])
+        return int(policy.get((row, col, bool(obs[-1] > 0.5)), 1))
+
+    return act
 
 
 @cache

@@ -5,12 +5,10 @@ python studies/bco_soil_check/run.py bco     # then: ... run.py soil
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 
 import rllib_asor  # noqa: F401  (registers our env ids)
@@ -19,12 +17,13 @@ from rllib_asor.algorithms.common.demonstrations import (
     rollout_demonstrations,
     save_demonstrations,
 )
+from rllib_asor.envs.lava import reactive_expert
 from rllib_asor.evaluation.rollout import module_policy, policy_module, stack_obs
+from studies.lib.lava_imitation import LAVA, lava_score, save_result
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results.json"
 DEMOS = HERE / "lava-expert.npz"
-LAVA = {"obs_mode": "onehot", "layout": "B"}
 SEEDS = (0, 1)
 PPO_LAVA = dict(
     lr=0.0005, gamma=0.99, lambda_=0.95, entropy_coeff=0.01, train_batch_size_per_learner=2000,
@@ -33,53 +32,21 @@ PPO_LAVA = dict(
 """tuned_examples/lava/ppo.yaml's PPO settings."""
 
 
-def _save(key: str, value: object) -> None:
-    data = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
-    data[key] = value
-    RESULTS.write_text(json.dumps(data, indent=1))
-
-
-def lava_expert():
-    from rllib_asor.envs.lava import GRID_SIZE, best_reactive_policy
-
-    table = best_reactive_policy("B")
-
-    def act(obs):
-        row, col = int(np.argmax(obs[:GRID_SIZE])), int(np.argmax(obs[GRID_SIZE : 2 * GRID_SIZE]))
-        return table[(row, col, bool(obs[-1] > 0.5))]
-
-    return act
-
-
-def lava_score(act, episodes_per_row: int = 1, seed: int = 0) -> float:
-    env = gym.make("rllib_asor/LavaWorld-v0", **LAVA)
-    total, n = 0.0, 0
-    for k in (2, 3, 4, 5):
-        for i in range(episodes_per_row):
-            obs, _ = env.reset(seed=seed + i, options={"lava_row": k})
-            done, ret = False, 0.0
-            while not done:
-                obs, r, term, trunc, _ = env.step(act(obs))
-                ret, done = ret + r, term or trunc
-            total, n = total + ret, n + 1
-    return total / n
-
-
 def greedy(algo):
     policy = module_policy(policy_module(algo))
     return lambda obs: int(policy(stack_obs([obs]))[0])
 
 
 def demonstrations() -> Demonstrations:
-    demos = rollout_demonstrations(lava_expert(), "rllib_asor/LavaWorld-v0", 40, env_kwargs=LAVA)
+    demos = rollout_demonstrations(reactive_expert(), "rllib_asor/LavaWorld-v0", 40, env_kwargs=LAVA)
     save_demonstrations(DEMOS, demos)
     return demos
 
 
 def baselines() -> None:
     rng = np.random.default_rng(0)
-    _save("random", lava_score(lambda o: int(rng.integers(4)), episodes_per_row=100))
-    _save("expert", lava_score(lava_expert()))
+    save_result(RESULTS, "random", lava_score(lambda o: int(rng.integers(4)), episodes_per_row=100))
+    save_result(RESULTS, "expert", lava_score(reactive_expert()))
 
 
 def bco() -> None:
@@ -103,7 +70,7 @@ def bco() -> None:
             for _ in range(6):
                 result = algo.train()
             labels = algo.idm.infer(demos.obs, demos.next_obs).cpu().numpy()
-            truth = np.array([lava_expert()(o) for o in demos.obs])
+            truth = np.array([reactive_expert()(o) for o in demos.obs])
             run = {
                 "score": lava_score(greedy(algo)),
                 "idm_accuracy_on_expert": float((labels == truth).mean()),
@@ -112,7 +79,7 @@ def bco() -> None:
             }
         finally:
             algo.stop()
-        _save(f"bco/seed{seed}", run)
+        save_result(RESULTS, f"bco/seed{seed}", run)
         print("bco", seed, run, flush=True)
 
 
@@ -150,7 +117,7 @@ def soil(arm: str = "soil") -> None:
                 run["idm_accuracy"] = result["learners"]["soil"].get("idm_accuracy")
         finally:
             algo.stop()
-        _save(f"{arm}/seed{seed}", run)
+        save_result(RESULTS, f"{arm}/seed{seed}", run)
         print(arm, seed, run, flush=True)
 
 

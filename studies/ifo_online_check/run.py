@@ -5,7 +5,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
@@ -18,45 +17,16 @@ from rllib_asor.algorithms.common.demonstrations import (
     rollout_demonstrations,
     save_demonstrations,
 )
+from rllib_asor.envs.lava import reactive_expert
 from rllib_asor.evaluation.rollout import module_policy, stack_obs
+from studies.lib.lava_imitation import LAVA, lava_score, save_result
 
 HERE = Path(__file__).parent
 RESULTS = HERE / "results.json"
-LAVA = {"obs_mode": "onehot", "layout": "B"}
 SEEDS = (0, 1)
 
 
-def _save(key: str, value: object) -> None:
-    data = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
-    data[key] = value
-    RESULTS.write_text(json.dumps(data, indent=1))
-
-
 # ----------------------------------------------------------------------------- GAIfO
-def lava_expert():
-    from rllib_asor.envs.lava import GRID_SIZE, best_reactive_policy
-
-    table = best_reactive_policy("B")
-
-    def act(obs):
-        row, col = int(np.argmax(obs[:GRID_SIZE])), int(np.argmax(obs[GRID_SIZE : 2 * GRID_SIZE]))
-        return table[(row, col, bool(obs[-1] > 0.5))]
-
-    return act
-
-
-def lava_score(act, episodes_per_row: int = 1, seed: int = 0) -> float:
-    env = gym.make("rllib_asor/LavaWorld-v0", **LAVA)
-    total, n = 0.0, 0
-    for k in (2, 3, 4, 5):
-        for i in range(episodes_per_row):
-            obs, _ = env.reset(seed=seed + i, options={"lava_row": k})
-            done, ret = False, 0.0
-            while not done:
-                obs, r, term, trunc, _ = env.step(act(obs))
-                ret, done = ret + r, term or trunc
-            total, n = total + ret, n + 1
-    return total / n
 
 
 def gaifo(reward_form: str = "gail") -> None:
@@ -64,13 +34,13 @@ def gaifo(reward_form: str = "gail") -> None:
 
     tag = "gaifo" if reward_form == "gail" else f"gaifo_{reward_form}"
 
-    demos = rollout_demonstrations(lava_expert(), "rllib_asor/LavaWorld-v0", 40, env_kwargs=LAVA)
+    demos = rollout_demonstrations(reactive_expert(), "rllib_asor/LavaWorld-v0", 40, env_kwargs=LAVA)
     path = HERE / "lava-expert.npz"
     save_demonstrations(path, demos)
     rng = np.random.default_rng(0)
     random_score = lava_score(lambda o: int(rng.integers(4)), episodes_per_row=100)
-    _save("gaifo/random", random_score)
-    _save("gaifo/expert", lava_score(lava_expert()))
+    save_result(RESULTS, "gaifo/random", random_score)
+    save_result(RESULTS, "gaifo/expert", lava_score(reactive_expert()))
     for seed in SEEDS:
         config = (
             GaifoConfig()
@@ -101,7 +71,7 @@ def gaifo(reward_form: str = "gail") -> None:
         finally:
             algo.stop()
         print(f"GAIfO ({reward_form}) seed {seed}: {row}")
-        _save(f"{tag}/seed{seed}", row)
+        save_result(RESULTS, f"{tag}/seed{seed}", row)
 
 
 # ----------------------------------------------------------------------------- GARAT
@@ -191,7 +161,7 @@ def garat() -> None:
             _, r, term, trunc, _ = env.step(rng.uniform(-2, 2, 1).astype(np.float32))
             ret, done = ret + r, term or trunc
         rets.append(ret)
-    _save("garat/random_target", float(np.mean(rets)))
+    save_result(RESULTS, "garat/random_target", float(np.mean(rets)))
     for seed in SEEDS:
         cfg = pendulum_ppo(
             GaratConfig()
@@ -203,7 +173,7 @@ def garat() -> None:
         row = train_and_score(cfg)
         row["gap"] = grounding_gap(row.pop("transformer"), seed=seed)
         print(f"GARAT seed {seed}: {row}")
-        _save(f"garat/seed{seed}", row)
+        save_result(RESULTS, f"garat/seed{seed}", row)
         plain = pendulum_ppo(
             PPOConfig()
             .environment("Pendulum-v1", env_config=SOURCE)
@@ -213,7 +183,7 @@ def garat() -> None:
         row = train_and_score(plain)
         row.pop("transformer"), row.pop("grounding")
         print(f"PPO (plain source) seed {seed}: {row}")
-        _save(f"ppo_source/seed{seed}", row)
+        save_result(RESULTS, f"ppo_source/seed{seed}", row)
 
 
 def pendulum_pi0(obs: np.ndarray, g: float = 10.0) -> np.ndarray:
@@ -303,7 +273,7 @@ def garat_pi0(
         path, rollout_demonstrations(act, target_pendulum(target_g, gain, limit=True), 20)
     )
     demos = load_demonstrations(path, gym.make("Pendulum-v1").observation_space)
-    _save(f"garat_pi0/{behaviour}{shift}", {
+    save_result(RESULTS, f"garat_pi0/{behaviour}{shift}", {
         "target": _returns(target_pendulum(target_g, gain, limit=True), act),
         "source": _returns(gym.make("Pendulum-v1", **SOURCE), act),
     })
@@ -372,7 +342,7 @@ def garat_pi0(
         if behaviour != "pi0":
             tag += f"_{behaviour}"
         print(f"GARAT pi0 ({disc_steps} D steps, {disc_input}, gp {grad_penalty}) seed {seed}: {row}")
-        _save(f"{tag}/seed{seed}", row)
+        save_result(RESULTS, f"{tag}/seed{seed}", row)
 
 
 def oracle_gap(target_g: str = "12") -> None:
@@ -410,7 +380,7 @@ def oracle_gap(target_g: str = "12") -> None:
         "pi0_at_torque_limit": saturated / len(rows),
     }
     print(f"oracle (target g {target_g}): {row}")
-    _save("garat_pi0/oracle" + ("" if target_g == "12" else f"_g{target_g}"), row)
+    save_result(RESULTS, "garat_pi0/oracle" + ("" if target_g == "12" else f"_g{target_g}"), row)
 
 
 if __name__ == "__main__":

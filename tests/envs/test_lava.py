@@ -18,6 +18,7 @@ from rllib_asor.envs.lava import (
     lava_cells,
     optimal_return,
     optimal_routes,
+    reactive_expert,
 )
 
 UP, RIGHT, DOWN, LEFT = 0, 1, 2, 3
@@ -75,6 +76,24 @@ def test_best_reactive_policy_achieves_its_returns_in_the_env() -> None:
             obs, r, term, trunc, info = env.step(policy[key])
             total, done = total + r, term or trunc
         assert info["is_success"] and total == pytest.approx(0.82)
+
+
+@pytest.mark.parametrize("obs_mode", ["onehot", "raw"])
+def test_the_reactive_expert_acts_on_the_envs_observations_and_scores_082(obs_mode: str) -> None:
+    act = reactive_expert(obs_mode=obs_mode)
+    env = LavaWorldEnv(obs_mode=obs_mode)
+    for k in LAVA_ROWS:
+        obs, _ = env.reset(seed=0, options={"lava_row": k})
+        total, done = 0.0, False
+        while not done:
+            obs, r, term, trunc, info = env.step(act(obs))
+            total, done = total + r, term or trunc
+        assert info["is_success"] and total == pytest.approx(0.82)
+
+
+def test_the_reactive_expert_refuses_an_unknown_obs_mode() -> None:
+    with pytest.raises(ValueError, match=r"obs_mode='pixels' is not allowed; expected one of"):
+        reactive_expert(obs_mode="pixels")
 
 
 def test_no_random_reactive_policy_beats_the_exhaustive_search() -> None:

@@ -33,15 +33,9 @@ def _demos(dim: int = 2, n: int = 8) -> Demonstrations:
 def lava_demos(tmp_path_factory) -> str:
     """State-only demonstrations of the lava world's best memoryless policy (8 episodes)."""
     from rllib_asor.algorithms.common.demonstrations import rollout_demonstrations
-    from rllib_asor.envs.lava import GRID_SIZE, best_reactive_policy
+    from rllib_asor.envs.lava import reactive_expert
 
-    table = best_reactive_policy("B")
-
-    def expert(obs):
-        row, col = int(np.argmax(obs[:GRID_SIZE])), int(np.argmax(obs[GRID_SIZE:-1]))
-        return table[(row, col, bool(obs[-1] > 0.5))]
-
-    demos = rollout_demonstrations(expert, LAVA, 8, env_kwargs={"obs_mode": "onehot"})
+    demos = rollout_demonstrations(reactive_expert(), LAVA, 8, env_kwargs={"obs_mode": "onehot"})
     path = tmp_path_factory.mktemp("gaifo") / "lava-expert.npz"
     save_demonstrations(path, demos)
     return str(path)
