@@ -26,6 +26,11 @@ EVAL_SEED = 1_000_000
 returns `rllib ab` wrote (with `--evaluation-config`, which `rllib ab` uses too)."""
 
 
+BEST_BY = "return_mean"
+RETURN_KEYS = ("return_mean", "return_min", "return_max")
+"""What `--best-by` may name besides the env's episode metrics."""
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of `rllib evaluate`."""
     parser.add_argument(
@@ -49,6 +54,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--evaluation-config",
         action="store_true",
         help="run the env as the config's evaluation_config sets it (e.g. unseen dynamics)",
+    )
+    parser.add_argument(
+        "--all-checkpoints",
+        action="store_true",
+        help="evaluate every checkpoint of every trial below the folder, oldest first, and "
+        "name each trial's best by --best-by (e.g. to find the peak of a run that declined)",
+    )
+    parser.add_argument(
+        "--best-by",
+        default=BEST_BY,
+        metavar="NAME",
+        help=f"with --all-checkpoints: what 'best' maximises: {BEST_BY} (default), return_min, "
+        "or an env metric the episodes report (the race's success, ...)",
     )
     parser.add_argument(
         "--json",
@@ -94,6 +112,58 @@ def trial_checkpoints(path: str) -> list[str]:
         if len(newest) > 1:
             return [newest[t] for t in sorted(newest)]
     return [find_checkpoint(path)]
+
+
+def every_checkpoint(path: str) -> list[str]:
+    """Every checkpoint below `path` (a checkpoint itself: `[path]`), trial by trial, each
+    trial's oldest first (by the number in `checkpoint_NNNNNN`). UsageError when there is none."""
+    path = os.path.abspath(os.path.expanduser(path))
+    if os.path.isfile(os.path.join(path, CHECKPOINT_MARKER)):
+        return [path]
+    find_checkpoint(path)  # the clear error for a missing folder or one without checkpoints
+    found = []
+    for root, dirs, files in os.walk(path, followlinks=True):
+        if CHECKPOINT_MARKER in files and os.path.basename(root).startswith("checkpoint_"):
+            found.append(root)
+            dirs.clear()
+    return sorted(found, key=lambda p: (os.path.dirname(p), _number(p), p))
+
+
+def _number(checkpoint: str) -> int:
+    digits = os.path.basename(checkpoint).removeprefix("checkpoint_")
+    return int(digits) if digits.isdigit() else -1
+
+
+def score(stats: dict[str, Any], by: str) -> float:
+    """`stats`' value of `by` (a return statistic or an env episode metric); UsageError naming
+    what is allowed when the evaluation has no such number."""
+    metrics = stats.get("episode_metrics") or {}
+    if by in RETURN_KEYS:
+        return float(stats[by])
+    if by in metrics:
+        return float(metrics[by])
+    raise UsageError(
+        f"{by!r} is not a number this evaluation reports; allowed: "
+        + ", ".join([*RETURN_KEYS, *sorted(metrics)]),
+        key="--best-by",
+    )
+
+
+def best_per_trial(results: list[dict[str, Any]], by: str) -> list[dict[str, Any]]:
+    """Per trial (a checkpoint's parent folder): its best checkpoint by `by` (the newest of
+    equal ones) beside its newest."""
+    trials: dict[str, list[dict[str, Any]]] = {}
+    for stats in results:
+        trials.setdefault(os.path.dirname(stats["checkpoint"]), []).append(stats)
+    out = []
+    for trial, runs in trials.items():
+        best = max(reversed(runs), key=lambda r: score(r, by))
+        out.append({
+            "trial": trial, "by": by,
+            "best": best["checkpoint"], "best_value": score(best, by),
+            "newest": runs[-1]["checkpoint"], "newest_value": score(runs[-1], by),
+        })  # fmt: skip
+    return out
 
 
 def _local_config(path: str, seed: int | None, evaluation_config: bool = False) -> dict[str, Any]:
@@ -196,13 +266,19 @@ def evaluate(
 
 def run(args: argparse.Namespace) -> int:
     """`rllib evaluate`: print mean/std return and per-episode returns (or JSON); for a folder
-    of several trials, the same for the newest checkpoint of each."""
+    of several trials, the same for the newest checkpoint of each; with `--all-checkpoints`,
+    for every checkpoint, then each trial's best by `--best-by` beside its newest."""
     if args.episodes < 1:
         raise UsageError(f"{args.episodes} is invalid: allowed an integer >= 1", key="--episodes")
-    paths = trial_checkpoints(args.checkpoint)
+    every, by = args.all_checkpoints, args.best_by
+    if by != BEST_BY and not every:
+        raise UsageError("is only read with --all-checkpoints", key="--best-by")
+    paths = every_checkpoint(args.checkpoint) if every else trial_checkpoints(args.checkpoint)
     if len(paths) > 1 and not args.json:
         print(
-            f"{len(paths)} trials under {args.checkpoint}: evaluating the newest checkpoint of each"
+            f"{len(paths)} checkpoints under {args.checkpoint}: evaluating every one"
+            if every
+            else f"{len(paths)} trials under {args.checkpoint}: evaluating the newest checkpoint of each"
         )
     results = []
     for path in paths:
@@ -210,10 +286,23 @@ def run(args: argparse.Namespace) -> int:
             path, args.episodes, explore=args.explore, seed=args.seed,
             evaluation_config=args.evaluation_config,
         )  # fmt: skip
+        if every:
+            score(stats, by)  # a --best-by the env does not report fails now, not at the end
         results.append(stats)
         if not args.json:
             _print(stats)
-    if args.json:
+    if every:
+        best = best_per_trial(results, by)
+        if args.json:
+            print(json.dumps({"checkpoints": results, "best": best}))
+        else:
+            for b in best:
+                print(
+                    f"best by {by} in {b['trial']}: {os.path.basename(b['best'])} "
+                    f"({b['best_value']:.3g}); the newest, {os.path.basename(b['newest'])}: "
+                    f"{b['newest_value']:.3g}"
+                )
+    elif args.json:
         print(json.dumps(results if len(paths) > 1 else results[0]))
     sys.stdout.flush()
     return 0

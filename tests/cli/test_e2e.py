@@ -113,6 +113,34 @@ def test_evaluate_finds_latest_checkpoint_in_experiment_dir(cartpole):
     assert "seed: 1000000 (the default: the seed rllib ab evaluates with)" in res.out
 
 
+def test_evaluate_all_checkpoints_names_each_trials_best_beside_its_newest(cartpole):
+    [trial] = trial_dirs(cartpole.exp_dir)
+    written = sorted(str(p) for p in trial.glob("checkpoint_*"))
+    assert len(written) >= 2  # checkpoint_freq: 1, two iterations
+    res = run_cli(
+        ["evaluate", str(cartpole.exp_dir), "--all-checkpoints", "--episodes", "2", "--json"]
+    )
+    assert res.rc == 0, res.err[-2000:]
+    out = json.loads(res.out.strip().splitlines()[-1])
+    assert [c["checkpoint"] for c in out["checkpoints"]] == written
+    [best] = out["best"]
+    assert best["best_value"] == max(c["return_mean"] for c in out["checkpoints"])
+    assert best["newest"] == written[-1] and best["by"] == "return_mean"
+    res = run_cli(["evaluate", str(cartpole.exp_dir), "--all-checkpoints", "--episodes", "1"])
+    assert res.rc == 0, res.err[-2000:]
+    assert f"{len(written)} checkpoints under {cartpole.exp_dir}: evaluating every one" in res.out
+    assert res.out.count("checkpoint: ") == len(written)
+    [line] = [x for x in res.out.splitlines() if x.startswith("best by return_mean in ")]
+    assert f"; the newest, {Path(written[-1]).name}: " in line
+    res = run_cli(["evaluate", str(cartpole.exp_dir), "--all-checkpoints", "--episodes", "1",
+                   "--best-by", "success"])  # fmt: skip
+    assert res.rc == 2
+    assert res.err.strip().splitlines() == [
+        "rllib evaluate: error: --best-by: 'success' is not a number this evaluation reports; "
+        "allowed: return_mean, return_min, return_max"
+    ], res.err
+
+
 def test_test_run_rerun_starts_its_smoke_folder_over_and_refuses_resume(cartpole):
     """A --test run is a smoke run in NAME-test: it is not resumed (real runs are:
     tests/cli/test_experiment_folder.py)."""
@@ -168,7 +196,9 @@ def test_failing_trial_exits_1(tmp_path, write_yaml, cli_ray):
           run: PPO
           config: {restart_failed_env_runners: false}
     """)
-    res = run_cli(["train", "file", path, "--test", "--storage-path", str(tmp_path), *LOCAL_SAMPLING])
+    res = run_cli(
+        ["train", "file", path, "--test", "--storage-path", str(tmp_path), *LOCAL_SAMPLING]
+    )
     assert res.rc == 1
     assert "1 errored" in res.out
 
