@@ -75,6 +75,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _checkpoints_below(path: str) -> list[str]:
+    """Every `checkpoint_*` directory with RLlib's marker file below `path` (unordered)."""
+    found = []
+    for root, dirs, files in os.walk(path, followlinks=True):
+        if CHECKPOINT_MARKER in files and os.path.basename(root).startswith("checkpoint_"):
+            found.append(root)
+            dirs.clear()
+    return found
+
+
+def _newest(checkpoints: list[str]) -> str:
+    return max(checkpoints, key=lambda p: (os.path.getmtime(p), p))
+
+
 def find_checkpoint(path: str) -> str:
     """`path` itself if it is an RLlib checkpoint, else the newest checkpoint below it."""
     path = os.path.abspath(os.path.expanduser(path))
@@ -82,18 +96,14 @@ def find_checkpoint(path: str) -> str:
         raise UsageError("not found; allowed: an RLlib checkpoint directory", source=path)
     if os.path.isfile(os.path.join(path, CHECKPOINT_MARKER)):
         return path
-    found = []
-    for root, dirs, files in os.walk(path):
-        if CHECKPOINT_MARKER in files and os.path.basename(root).startswith("checkpoint_"):
-            found.append(root)
-            dirs.clear()
+    found = _checkpoints_below(path)
     if not found:
         raise UsageError(
             "no RLlib checkpoint in this directory; allowed: a checkpoint_NNNNNN "
             "directory written by 'rllib train'",
             source=path,
         )
-    return max(found, key=lambda p: (os.path.getmtime(p), p))
+    return _newest(found)
 
 
 def trial_checkpoints(path: str) -> list[str]:
@@ -101,16 +111,11 @@ def trial_checkpoints(path: str) -> list[str]:
     `[path]` for a checkpoint itself. UsageError when there is none."""
     path = os.path.abspath(os.path.expanduser(path))
     if os.path.isdir(path) and not os.path.isfile(os.path.join(path, CHECKPOINT_MARKER)):
-        newest: dict[str, str] = {}
-        for root, dirs, files in os.walk(path, followlinks=True):
-            if CHECKPOINT_MARKER in files and os.path.basename(root).startswith("checkpoint_"):
-                trial = os.path.dirname(root)
-                best = newest.get(trial)
-                if best is None or (os.path.getmtime(root), root) > (os.path.getmtime(best), best):
-                    newest[trial] = root
-                dirs.clear()
-        if len(newest) > 1:
-            return [newest[t] for t in sorted(newest)]
+        trials: dict[str, list[str]] = {}
+        for checkpoint in _checkpoints_below(path):
+            trials.setdefault(os.path.dirname(checkpoint), []).append(checkpoint)
+        if len(trials) > 1:
+            return [_newest(trials[t]) for t in sorted(trials)]
     return [find_checkpoint(path)]
 
 
@@ -121,11 +126,7 @@ def every_checkpoint(path: str) -> list[str]:
     if os.path.isfile(os.path.join(path, CHECKPOINT_MARKER)):
         return [path]
     find_checkpoint(path)  # the clear error for a missing folder or one without checkpoints
-    found = []
-    for root, dirs, files in os.walk(path, followlinks=True):
-        if CHECKPOINT_MARKER in files and os.path.basename(root).startswith("checkpoint_"):
-            found.append(root)
-            dirs.clear()
+    found = _checkpoints_below(path)
     return sorted(found, key=lambda p: (os.path.dirname(p), _number(p), p))
 
 

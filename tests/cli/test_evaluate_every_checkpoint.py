@@ -70,3 +70,14 @@ def test_best_by_without_all_checkpoints_is_one_line_and_exit_2(tmp_path: Path, 
     assert main(["evaluate", path, "--best-by", "success"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["rllib evaluate: error: --best-by: is only read with --all-checkpoints"], err
+
+
+def test_without_the_flag_each_trials_newest_checkpoint_by_time(tmp_path: Path) -> None:
+    import os
+
+    a = [checkpoint(tmp_path / "exp/trial_a", n) for n in (1, 2)]
+    b = [checkpoint(tmp_path / "exp/trial_b", n) for n in (1, 2)]
+    os.utime(a[0], (2e9, 2e9))  # trial_a's checkpoint_000001 written last
+    assert evaluate.trial_checkpoints(str(tmp_path / "exp")) == [a[0], b[1]]
+    assert evaluate.trial_checkpoints(str(tmp_path / "exp/trial_b")) == [b[1]]
+    assert evaluate.find_checkpoint(str(tmp_path / "exp/trial_a")) == a[0]
