@@ -196,10 +196,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=500_000, help="env-step budget per run")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     parser.add_argument("--layout", choices=["asis", "cpu"], default="asis")
+    parser.add_argument(
+        "--at-once",
+        type=int,
+        help="runs in flight at most, started in the order of the seeds (default: all "
+        "submitted at once, started in Ray's order)",
+    )
     parser.add_argument("--out", default="studies/race_scale")
     args = parser.parse_args(argv)
-    if args.seeds < 1 or args.steps < 1:
-        parser.error(f"--seeds {args.seeds} / --steps {args.steps}: allowed integers ≥ 1")
+    if args.seeds < 1 or args.steps < 1 or (args.at_once is not None and args.at_once < 1):
+        parser.error(
+            f"--seeds {args.seeds} / --steps {args.steps} / --at-once {args.at_once}: "
+            "allowed integers ≥ 1"
+        )
     runs = Path(args.out).resolve() / "runs"
     runs.mkdir(parents=True, exist_ok=True)
     specs = []
@@ -228,11 +237,14 @@ def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(ROOT))
     # max_calls=1: each run in a fresh worker process, which gives its memory back when the run
     # ends (a 2M-step run holds about 4.7 GB, and a reused worker kept growing from there)
-    pending = {
-        ray.remote(max_calls=1, **resources(s["method"], s["layout"]))(run_one).remote(s): s
-        for s in specs
-    }
-    while pending:
+    # Ray starts queued tasks in no set order, so with --at-once only that many are submitted
+    # and the next spec goes in when one ends: the runs start in the order of `specs`
+    queue, at_once, pending = list(specs), args.at_once or len(specs), {}
+    while queue or pending:
+        while queue and len(pending) < at_once:
+            s = queue.pop(0)
+            task = ray.remote(max_calls=1, **resources(s["method"], s["layout"]))(run_one)
+            pending[task.remote(s)] = s
         [done], _ = ray.wait(list(pending), num_returns=1)
         spec = pending.pop(done)
         record = ray.get(done)
