@@ -70,8 +70,8 @@ def summarise(runs: Path) -> dict[str, Any]:
             baseline_name="today",
             treatment_name="today-2m",
             metric=STUDY.metric,
-        ).to_json()  # fmt: skip
-        if len(seeds) >= 3
+        ).to_json()
+        if len(seeds) >= 3  # fewer pairs give no BCa interval
         else {"pairs": len(seeds)}
     )
     return res
