@@ -1,7 +1,8 @@
 """Race: the many-runner setting (ppo-asor-scale.yaml) against today's example (ppo-asor.yaml),
 and (studies/race_scale_steps) the many-runner setting with more policy updates per env step,
 and (studies/race_scale_budget) the many-runner setting at its own 2M-env-step stop, and
-(studies/race_scale_decline) that setting with one thing changed mid-run (SWITCHES).
+(studies/race_scale_decline) that setting with one thing changed mid-run (SWITCHES), and
+(studies/race_scale_2m) today's example at its own 2M-env-step stop.
 
 Each run trains one YAML as written (its env runners, batch, minibatch, Learner device), seed
 `s` (the algorithm's and ASOR's), until `--steps` env steps, then evaluates its stochastic
