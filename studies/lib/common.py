@@ -27,6 +27,7 @@ __all__ = [
     "save_partial",
     "start_local_ray",
     "write_json",
+    "window_means",
     "write_summary",
 ]
 
@@ -42,6 +43,23 @@ def write_summary(
     (folder / "summary.json").write_text(json.dumps(res, indent=1))
     (folder / "table.md").write_text(md := table(res))
     return md
+
+
+def window_means(
+    steps: Sequence[float], values: Sequence[float | None], every: int, stop: int
+) -> list[float | None]:
+    """The mean of the finite `values` per `every` env steps, windows (end − every, end] for
+    end = every, 2·every, … up to `stop`; None for a window without one (an iteration where no
+    episode ended logs NaN)."""
+    out = []
+    for end in range(every, stop + 1, every):
+        xs = [
+            v
+            for s, v in zip(steps, values, strict=True)
+            if end - every < s <= end and v is not None and math.isfinite(v)
+        ]
+        out.append(sum(xs) / len(xs) if xs else None)
+    return out
 
 
 def round_floats(value: Any, digits: int = 6) -> Any:

@@ -5,7 +5,6 @@ results.json, updated one key at a time (each finished run saved at once)."""
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -14,6 +13,7 @@ import gymnasium as gym
 import numpy as np
 
 import rllib_asor  # noqa: F401  (registers our env ids)
+from studies.lib.common import write_json
 
 LAVA = {"obs_mode": "onehot", "layout": "B"}
 """The checks' lava world: layout B, one-hot observations."""
@@ -38,6 +38,4 @@ def save_result(path: Path, key: str, value: Any) -> None:
     """Set `key` in the JSON object at `path` (made if missing), written atomically."""
     data = json.loads(path.read_text()) if path.exists() else {}
     data[key] = value
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data, indent=1))
-    os.replace(tmp, path)
+    write_json(path, data)

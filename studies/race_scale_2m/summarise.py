@@ -11,14 +11,12 @@ writes table.md and summary.json in STUDY_DIR (default: this folder).
 
 from __future__ import annotations
 
-import math
-import statistics
 import sys
 from pathlib import Path
 from typing import Any
 
 from rllib_asor.report.paired import paired_difference
-from studies.lib.common import write_summary
+from studies.lib.common import window_means, write_summary
 from studies.lib.compare import load_metric_by_seed
 from studies.lib.paired_verdict import PairedStudy
 from studies.lib.run_files import read_runs
@@ -33,11 +31,7 @@ last one (README.md)."""
 def windows(curve: list[list[float]]) -> list[float | None]:
     """Mean training success (`race/success_rate`, NaN iterations left out) per WINDOW env
     steps up to STOP; None for a window without a finished race."""
-    out = []
-    for end in range(WINDOW, STOP + 1, WINDOW):
-        xs = [s for step, s, _ in curve if end - WINDOW < step <= end and math.isfinite(s)]
-        out.append(statistics.fmean(xs) if xs else None)
-    return out
+    return window_means([c[0] for c in curve], [c[1] for c in curve], WINDOW, STOP)
 
 
 def declines(curve: list[list[float]]) -> bool:

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from studies.lib.common import write_summary
+from studies.lib.common import window_means, write_summary
 from studies.lib.run_files import existing, read_run, read_runs, run_file
 
 STORED = Path(__file__).resolve().parents[1] / "race_scale_budget" / "runs"
@@ -34,11 +34,6 @@ READING = {
     "needless jumps": "race/unnecessary_jump_rate",
 }
 """Column → the trace's key (README.md, "Reading")."""
-
-
-def _mean(values: list[float]) -> float | None:
-    finite = [v for v in values if v is not None and math.isfinite(v)]
-    return sum(finite) / len(finite) if finite else None
 
 
 def _same(a: float, b: float | None) -> bool:
@@ -63,12 +58,15 @@ def summarise(runs: Path) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for run in read_runs(runs):
         steps = [int(step) for step, _, _ in run["curve"]]
-        rows = []
-        for end in range(EVERY, max(steps) + 1, EVERY):
-            window = [t for s, t in zip(steps, run["trace"], strict=True) if end - EVERY < s <= end]
-            rows.append(
-                {"steps": end, **{c: _mean([t.get(k) for t in window]) for c, k in READING.items()}}
-            )
+        columns = {
+            c: window_means(steps, [t.get(k) for t in run["trace"]], EVERY, max(steps))
+            for c, k in READING.items()
+        }
+        ends = range(EVERY, max(steps) + 1, EVERY)
+        rows = [
+            {"steps": end, **{c: means[i] for c, means in columns.items()}}
+            for i, end in enumerate(ends)
+        ]
         out[f"{run['method']}-{run['seed']}"] = {
             "eval_success": run["eval"]["mean"]["success"],
             "reproduced": reproduced(run),
