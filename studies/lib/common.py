@@ -28,6 +28,7 @@ __all__ = [
     "start_local_ray",
     "write_json",
     "window_means",
+    "declines",
     "write_summary",
 ]
 
@@ -60,6 +61,20 @@ def window_means(
         ]
         out.append(sum(xs) / len(xs) if xs else None)
     return out
+
+
+def declines(
+    curve: Sequence[Sequence[float]],
+    window: int = 125_000,
+    stop: int = 2_000_000,
+    peak: float = 0.6,
+    low: float = 0.4,
+) -> bool:
+    """Whether a run's training success declines (studies/race_scale_2m's reading): its mean
+    per `window` env steps up to `stop` (`curve` rows are [env steps, success, ...]) reaches
+    `peak` in some window and is below `low` over the last one."""
+    w = window_means([c[0] for c in curve], [c[1] for c in curve], window, stop)
+    return max((x for x in w if x is not None), default=0.0) >= peak and (w[-1] or 0.0) < low
 
 
 def round_floats(value: Any, digits: int = 6) -> Any:

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from rllib_asor.report.paired import paired_difference
-from studies.lib.common import write_summary
+from studies.lib.common import declines, write_summary
 from studies.lib.compare import load_metric_by_seed
 from studies.lib.run_files import read_runs
 
@@ -134,3 +134,48 @@ class PairedStudy:
         → its summary.json and table.md, and the table printed."""
         folder = Path(sys.argv[1]) if len(sys.argv) > 1 else default_folder
         print(write_summary(folder, self.summarise, self.table))
+
+
+def declining_seeds(runs: Path, method: str) -> dict[str, Any]:
+    """`method`'s finished runs in the runs folder `runs`, and the seeds among them whose
+    training success declines (`studies.lib.common.declines`), read beside a rule."""
+    done = [r for r in read_runs(runs) if r["method"] == method]
+    return {"runs": len(done), "seeds": sorted(r["seed"] for r in done if declines(r["curve"]))}
+
+
+def declining_table(declining: dict[str, dict[str, Any]]) -> list[str]:
+    """Markdown rows: per method its runs and declining seeds."""
+    lines = [
+        "| method | runs | declining (README.md's reading) | seeds |",
+        "|---|---|---|---|",
+    ]
+    for method, d in declining.items():
+        seeds = ", ".join(map(str, d["seeds"])) or "–"
+        lines.append(f"| {method} | {d['runs']} | {len(d['seeds'])} | {seeds} |")
+    return lines
+
+
+def descriptive_pair(
+    study_dirs: Sequence[Path], metric: str, baseline: str, treatment: str
+) -> dict[str, Any]:
+    """`treatment − baseline` over the seeds both have (read from `study_dirs`), as
+    `paired_difference`'s JSON; only {"pairs": n} below 3 pairs (no BCa interval there)."""
+    by_seed = load_metric_by_seed(list(study_dirs), metric)
+    then, now = by_seed.get(baseline, {}), by_seed.get(treatment, {})
+    seeds = sorted(set(now) & set(then))
+    if len(seeds) < 3:
+        return {"pairs": len(seeds)}
+    return paired_difference(
+        {s: then[s] for s in seeds}, {s: now[s] for s in seeds},
+        baseline_name=baseline, treatment_name=treatment, metric=metric,
+    ).to_json()  # fmt: skip
+
+
+def descriptive_line(p: dict[str, Any], label: str) -> str:
+    """One line for a `descriptive_pair` result, named `label` ("a − b (500k)")."""
+    if "diff_mean" not in p:
+        return f"{label}: {p['pairs']} pairs so far"
+    return (
+        f"{label}, descriptive: {p['pairs']} pairs, {p['diff_mean']:+.3f}, "
+        f"95 % BCa {p['ci_low']:+.3f} … {p['ci_high']:+.3f}"
+    )

@@ -2,7 +2,8 @@
 and (studies/race_scale_steps) the many-runner setting with more policy updates per env step,
 and (studies/race_scale_budget) the many-runner setting at its own 2M-env-step stop, and
 (studies/race_scale_decline) that setting with one thing changed mid-run (SWITCHES), and
-(studies/race_scale_2m) today's example at its own 2M-env-step stop.
+(studies/race_scale_2m) today's example at its own 2M-env-step stop, and
+(studies/race_scale_rollout_2m) the 32-step rollouts at that stop.
 
 Each run trains one YAML as written (its env runners, batch, minibatch, Learner device), seed
 `s` (the algorithm's and ASOR's), until `--steps` env steps, then evaluates its stochastic
@@ -54,6 +55,8 @@ METHODS: dict[str, tuple[Path, dict[str, int]]] = {
     "scale-2m-asor-never": (SCALE, {}),
     # studies/race_scale_2m: today's file as written, run to its own 2M stop (--steps)
     "today-2m": (TODAY, {}),
+    # studies/race_scale_rollout_2m: race_scale_steps' `rollout` run to the files' 2M stop
+    "rollout-2m": (SCALE, {"train_batch_size": 3584, "minibatch_size": 896}),
 }
 """Each method: its YAML and the `.training()` settings that replace the YAML's."""
 LOW_LR = 3e-4
