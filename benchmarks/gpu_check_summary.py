@@ -4,7 +4,9 @@
 
 Reads OUT/gpu_tests.xml (pytest's junit report), OUT/e2e/scaling.json (sampling and end to
 end), OUT/overlap/scaling.json (end to end with overlapped sampling), OUT/envs32/scaling.json
-(sampling with 32 envs per runner), OUT/learner/scaling.json (the Learner alone) and
+(sampling with 32 envs per runner), OUT/learner/scaling.json (the Learner alone),
+OUT/compile/scaling.json (the Learner alone, its update compiled; shown beside the one not
+compiled, not judged) and
 OUT/split/scaling.json (where an iteration's time goes, and the weight sync), all from
 `benchmarks.scaling` at minibatch 2,048; a missing file is a row or a line that says so. The
 targets are those for a 16-core node with one GPU: at the most runners (14) PPO+ASOR
@@ -126,10 +128,33 @@ def targets(
     return out
 
 
+def compile_rows(learner: dict[str, Any] | None, compiled: dict[str, Any] | None) -> list[str]:
+    """Per algorithm: the compiled Learner ÷ the one not compiled, at the same runners and
+    minibatch, and the compiled one's first (untimed) pass: shown, not judged."""
+    if not compiled:
+        return []
+    s = compiled.get("settings", {})
+    backend = s.get("compile_backend")
+    how = f"{backend}, {s.get('torch_compile')}" if backend == "inductor" else backend
+    lines = []
+    for row in compiled.get("rows", []):
+        algo, n = row["algo"], row["runners"]
+        fast, slow = row.get("learner"), rate(learner, algo, n, "learner")
+        if not isinstance(fast, float):
+            continue
+        ratio = f"{fast / slow:.2f}× ({fmt(fast)} ÷ {fmt(slow)})" if slow else f"{fmt(fast)}"
+        lines.append(
+            f"| Learner alone, compiled ({how}) ÷ not compiled, {LABELS[algo]}, {n} runner(s) "
+            f"| {ratio}; first pass {row.get('learner_warmup_s', 0.0):.0f} s | shown | |"
+        )
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     out = Path((argv if argv is not None else sys.argv[1:])[0])
     e2e, learner = load(out / "e2e" / "scaling.json"), load(out / "learner" / "scaling.json")
     overlap, envs32 = load(out / "overlap" / "scaling.json"), load(out / "envs32" / "scaling.json")
+    compiled = load(out / "compile" / "scaling.json")
     lines = ["", "| check | measured | target | verdict |", "|---|---|---|---|"]
     lines.append(
         f"| gpu tests (`pytest -m gpu`) | {test_counts(out / 'gpu_tests.xml')} | all pass | |"
@@ -139,6 +164,7 @@ def main(argv: list[str] | None = None) -> int:
         ("overlapped", overlap),
         ("sampling, 32 envs per runner", envs32),
         ("Learner alone", learner),
+        ("Learner alone, compiled", compiled),
     )
     for name, res in parts:
         if res is None:
@@ -168,6 +194,7 @@ def main(argv: list[str] | None = None) -> int:
             )
     for check, shown, target, verdict in targets(e2e, learner, overlap, envs32):
         lines.append(f"| {check} | {shown} | {target} | {verdict} |")
+    lines += compile_rows(learner, compiled)
     split = load(out / "split" / "scaling.json")
     if split is None:
         lines.append("\nsplit of an iteration: no result (see split.log)")

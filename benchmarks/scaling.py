@@ -26,6 +26,12 @@ interleaved rounds: a fair before/after ratio on a shared machine.
     python -m benchmarks.scaling --quick                            # 1 and 2 runners, CPU
     python -m benchmarks.scaling --device cuda --runners 1,2,4,8,14
     python -m benchmarks.scaling --parts learner --trees /tmp/before . --rounds 3
+    python -m benchmarks.scaling --device cuda --parts learner --runners 14 --minibatch 2048 \
+        --torch-compile reduce-overhead --compile-backend cudagraphs
+
+`--torch-compile MODE` compiles each Learner's whole update (RLlib's `torch_compile_learner`,
+`complete_update`; every part that builds one); the Learner part then reports its untimed
+first pass (`learner_warmup_s`: the compile and CUDA graph capture) beside the rate.
 
 Writes OUT/scaling.json (every number, the settings, the machine) and prints one table.
 """
@@ -53,6 +59,13 @@ LABELS = {
     "ppo_overlap": "PPO overlapped",
     "asor_overlap": "PPO+ASOR overlapped",
 }
+COMPILE_MODES = ("off", "default", "reduce-overhead", "max-autotune")
+"""`--torch-compile`: off, or the torch.compile mode of the Learner's compiled update
+("reduce-overhead": CUDA graphs on a GPU, the per-minibatch launch cost a GPU Learner pays)."""
+COMPILE_BACKENDS = ("inductor", "cudagraphs", "aot_eager")
+"""`--compile-backend`: inductor (generated kernels; needs a C compiler, and Triton on a GPU),
+cudagraphs (CUDA graphs of the eager kernels, no compiler), aot_eager (eager kernels, for
+checking the compiled path on a CPU)."""
 OVERLAP = "_overlap"
 """An algorithm name's suffix for `OverlappedPPO` (the runners sample batch k+1 while the
 Learner trains on batch k, its lag corrected: rllib_asor/algorithms/ppo/overlap.py)."""
@@ -126,6 +139,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rounds", type=int, default=1, help="interleaved rounds over --trees")
     p.add_argument("--model-config", type=json.loads, default={}, help="race_net settings (JSON)")
     p.add_argument(
+        "--torch-compile",
+        default="off",
+        help="compile the Learner's whole update (RLlib's torch_compile_learner, "
+        "complete_update) in this torch.compile mode: " + ", ".join(COMPILE_MODES),
+    )
+    p.add_argument(
+        "--compile-backend",
+        default="inductor",
+        help="its dynamo backend: "
+        + ", ".join(COMPILE_BACKENDS)
+        + " (cudagraphs: CUDA only; the mode is inductor's, the others ignore it)",
+    )
+    p.add_argument(
         "--drop-bootstrap-rows",
         action="store_true",
         help="PPO without its masked bootstrap rows (rllib_asor.algorithms.ppo.lean)",
@@ -146,6 +172,18 @@ def settle(args: argparse.Namespace) -> argparse.Namespace:
     args.runner_counts = parse_runners(args.runners)
     args.algo_list = parse_list(args.algos, ALGOS, "--algos")
     args.part_list = parse_list(args.parts, PARTS, "--parts")
+    if args.torch_compile not in COMPILE_MODES:
+        raise ValueError(
+            f"--torch-compile {args.torch_compile!r} is invalid: allowed "
+            + ", ".join(COMPILE_MODES)
+        )
+    if args.compile_backend not in COMPILE_BACKENDS:
+        raise ValueError(
+            f"--compile-backend {args.compile_backend!r} is invalid: allowed "
+            + ", ".join(COMPILE_BACKENDS)
+        )
+    if args.compile_backend == "cudagraphs" and args.device != "cuda":
+        raise ValueError("--compile-backend cudagraphs is invalid here: allowed with --device cuda")
     for key in (
         "envs_per_runner",
         "rows_per_runner",
@@ -200,6 +238,16 @@ def race_config(algo: str, args: argparse.Namespace, runners: int, seed: int = 0
     )
     if args.device == "cuda":
         config = config.learners(num_gpus_per_learner=1)
+    if getattr(args, "torch_compile", "off") != "off":
+        config = config.framework(
+            torch_compile_learner=True,
+            torch_compile_learner_what_to_compile="complete_update",
+            torch_compile_learner_dynamo_backend=args.compile_backend,
+            # a mode is inductor's; torch hands other backends no mode
+            torch_compile_learner_dynamo_mode=(
+                args.torch_compile if args.compile_backend == "inductor" else None
+            ),
+        )
     if getattr(args, "drop_bootstrap_rows", False):
         from rllib_asor.algorithms.ppo.lean import drop_bootstrap_rows
 
@@ -258,8 +306,10 @@ def measure_learner(
     learner = _build_learner(config)
     cuda = args.device == "cuda"
     lifetime, times, cpu_times, steps = 0, [], [], []
-    passes = 1 + args.learner_passes
+    passes, started, warmup_s = 1 + args.learner_passes, time.perf_counter(), 0.0
     for p in range(passes):
+        if p == 1:
+            warmup_s = time.perf_counter() - started
         for b in range(len(recorded)):
             episodes = runner_batch(recorded, b, runners)
             n = sum(len(e) for e in episodes)
@@ -289,6 +339,8 @@ def measure_learner(
         "update_s_median": statistics.median(times),
         "ms_per_minibatch": 1000 * sum(times) / len(times) / minibatches,
         "updates_timed": len(times),
+        # The untimed first pass: with --torch-compile, mostly compiling (and CUDA graph capture)
+        "warmup_s": warmup_s,
         "learner_device": device,
     }
 
@@ -806,6 +858,7 @@ def run(args: argparse.Namespace, out: Path) -> dict[str, Any]:
                         "learner": res["env_steps_per_s"],
                         "learner_per_cpu_s": res["env_steps_per_cpu_s"],
                         "ms_per_minibatch": res["ms_per_minibatch"],
+                        "learner_warmup_s": res["warmup_s"],
                         "learner_device": res["learner_device"],
                     }
                 )

@@ -1,22 +1,24 @@
 #!/usr/bin/env bash
 # The GPU check (docs/cluster.md, "Running on GPUs"): on a machine with the project installed
 # (`make install`, or the offline kit: `source .gpu/install.sh`), run the `gpu`-marked tests and
-# the race scaling benchmark, then print one summary table. About 8 minutes on an H200, at most
-# about 13: every step runs under `timeout`. On a machine without CUDA the tests skip and the
+# the race scaling benchmark, then print one summary table. About 10 minutes on an H200, at most
+# about 16: every step runs under `timeout`. On a machine without CUDA the tests skip and the
 # benchmark runs --quick on the CPU. Steps that cannot run here (no pytest, Ray cannot start)
 # print one line and the rest goes on. Usage:  scripts/gpu_check.sh   or   make gpu-check
 # Knobs: GPU_CHECK_OUT (default benchmarks/out/gpu_check), GPU_CHECK_TEST_S (240),
 # GPU_CHECK_BENCH_S (160; 420 without CUDA), GPU_CHECK_LEARNER_S (60; 120 without CUDA),
 # GPU_CHECK_OVERLAP_S (100; 300 without CUDA), GPU_CHECK_ENVS32_S (60; 200 without CUDA),
-# GPU_CHECK_SPLIT_S (120; 420 without CUDA), GPU_CHECK_RUNNER_S (60; 120 without CUDA): a limit
-# of 0 skips its step.
+# GPU_CHECK_SPLIT_S (120; 420 without CUDA), GPU_CHECK_RUNNER_S (60; 120 without CUDA),
+# GPU_CHECK_COMPILE_S (120; 200 without CUDA): a limit of 0 skips its step.
+# GPU_CHECK_COMPILE_BACKEND: the compiled Learner's dynamo backend (cudagraphs on a GPU: no C
+# compiler needed; aot_eager without CUDA; inductor where the node has gcc and Triton).
 # GPU_CHECK_RUNNERS (1,14 on a GPU; 1,2 without). GPU_CHECK_TEST_WORKERS (6 on a GPU, where
 # pytest-xdist is installed; 0 runs the tests one by one).
 set -u
 cd "$(dirname "$0")/.."
 out=${GPU_CHECK_OUT:-benchmarks/out/gpu_check}
 mkdir -p "$out"
-rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/e2e "$out"/overlap "$out"/envs32 "$out"/split \
+rm -rf "$out"/*.xml "$out"/*.log "$out"/learner "$out"/compile "$out"/e2e "$out"/overlap "$out"/envs32 "$out"/split \
   "$out"/runner
 if [ -x .venv/bin/python ]; then py=${PYTHON:-.venv/bin/python}; else py=${PYTHON:-python3}; fi
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} RAY_memory_monitor_refresh_ms=0 \
@@ -32,16 +34,17 @@ fi
 cuda=$("$py" -c "import torch; print(int(torch.cuda.is_available()))")
 if [ "$cuda" = 1 ]; then
   device=cuda; runners=${GPU_CHECK_RUNNERS:-1,14}; bench_s=160; learner_s=60; overlap_s=100
-  envs32_s=60; split_s=120; runner_s=60; test_workers=6
+  envs32_s=60; split_s=120; runner_s=60; test_workers=6; compile_s=120; compile_backend=cudagraphs
 else  # a CPU machine checks the script itself: slower, so longer limits
   device=cpu; runners=${GPU_CHECK_RUNNERS:-1,2}; bench_s=420; learner_s=120; overlap_s=300
-  envs32_s=200; split_s=420; runner_s=120; test_workers=0
+  envs32_s=200; split_s=420; runner_s=120; test_workers=0; compile_s=200; compile_backend=aot_eager
   echo "gpu-check: torch sees no CUDA device: the gpu tests skip, the benchmark runs on the CPU"
 fi
 test_s=${GPU_CHECK_TEST_S:-240}; test_workers=${GPU_CHECK_TEST_WORKERS:-$test_workers}; bench_s=${GPU_CHECK_BENCH_S:-$bench_s}
 learner_s=${GPU_CHECK_LEARNER_S:-$learner_s}; split_s=${GPU_CHECK_SPLIT_S:-$split_s}
 overlap_s=${GPU_CHECK_OVERLAP_S:-$overlap_s}; envs32_s=${GPU_CHECK_ENVS32_S:-$envs32_s}
-runner_s=${GPU_CHECK_RUNNER_S:-$runner_s}
+runner_s=${GPU_CHECK_RUNNER_S:-$runner_s}; compile_s=${GPU_CHECK_COMPILE_S:-$compile_s}
+compile_backend=${GPU_CHECK_COMPILE_BACKEND:-$compile_backend}
 skip() { [ "$1" = 0 ] && echo "gpu-check: skipped $2 (its limit is 0)"; }
 # bench NAME LIMIT WHAT ARGS...: `benchmarks.scaling --quick ARGS` under LIMIT seconds into
 # $out/NAME (its scaling.json) and $out/NAME.log; a LIMIT of 0 skips it.
@@ -80,6 +83,12 @@ fi
 last=${runners##*,}
 bench learner "$learner_s" "Learner alone, $last runners' batches" \
   --runners "$last" --parts learner --minibatch 2048
+
+# 2b. The same with the Learner's whole update compiled (RLlib's torch_compile_learner,
+#     complete_update, mode reduce-overhead: on a GPU, CUDA graphs replay the update's ~400
+#     kernel launches per minibatch; docs/cluster.md, "Per-minibatch overhead").
+bench compile "$compile_s" "Learner alone, compiled ($compile_backend)" --runners "$last" \
+  --parts learner --minibatch 2048 --torch-compile reduce-overhead --compile-backend "$compile_backend"
 
 # 3. Sampling and end to end, PPO and PPO+ASOR, fewest and most runners, minibatch 2,048.
 bench e2e "$bench_s" "sampling and end to end" --runners "$runners" --parts sample,e2e \

@@ -151,3 +151,50 @@ def test_cuda_without_a_gpu_is_refused_in_one_line(capsys: pytest.CaptureFixture
     assert capsys.readouterr().err.strip() == (
         "scaling: --device 'cuda' is invalid here: torch sees no CUDA device; allowed cpu"
     )
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--torch-compile", "fast"], "--torch-compile 'fast' is invalid: allowed off, default"),
+        (["--torch-compile", "default", "--compile-backend", "tvm"],
+         "--compile-backend 'tvm' is invalid: allowed inductor, cudagraphs, aot_eager"),
+        (["--torch-compile", "default", "--compile-backend", "cudagraphs"],
+         "--compile-backend cudagraphs is invalid here: allowed with --device cuda"),
+    ],
+)  # fmt: skip
+def test_bad_compile_settings_are_one_line(
+    flags: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert scaling.main(flags) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_a_compiled_learner_is_configured_and_its_mode_goes_to_inductor_only() -> None:
+    def config(*flags: str):
+        args = scaling.settle(scaling.build_parser().parse_args(["--quick", *flags]))
+        return scaling.race_config("asor", args, 1)
+
+    assert not config().torch_compile_learner
+    c = config("--torch-compile", "reduce-overhead")
+    assert c.torch_compile_learner and c.torch_compile_learner_dynamo_backend == "inductor"
+    assert c.torch_compile_learner_dynamo_mode == "reduce-overhead"
+    assert str(c.torch_compile_learner_what_to_compile).endswith("complete_update")
+    c = config("--torch-compile", "reduce-overhead", "--compile-backend", "aot_eager")
+    assert c.torch_compile_learner_dynamo_backend == "aot_eager"
+    assert c.torch_compile_learner_dynamo_mode is None
+
+
+def test_the_compiled_learner_is_shown_beside_the_one_not_compiled() -> None:
+    learner = scaling_json("cuda", {("ppo", 14): 0.0, ("asor", 14): 0.0}, 14_000.0)
+    compiled = scaling_json("cuda", {("ppo", 14): 0.0, ("asor", 14): 0.0}, 28_000.0)
+    compiled["settings"].update(compile_backend="cudagraphs", torch_compile="reduce-overhead")
+    for row in compiled["rows"]:
+        row["learner_warmup_s"] = 41.0
+    rows = summary.compile_rows(learner, compiled)
+    assert len(rows) == 2
+    assert "compiled (cudagraphs) ÷ not compiled, PPO+ASOR, 14 runner(s)" in rows[1]
+    assert "2.00× (28,000 ÷ 14,000); first pass 41 s" in rows[1]
+    # without the Learner not compiled: its own rate only; without a compiled run: no rows
+    assert "| 28,000; first pass 41 s |" in summary.compile_rows(None, compiled)[0]
+    assert summary.compile_rows(learner, None) == []
