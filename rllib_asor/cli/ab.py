@@ -349,7 +349,7 @@ def write_outputs(path: str, baseline: str, trials: list[str] | None = None) -> 
 def run(args: argparse.Namespace) -> int:
     """`rllib ab`: 0 when every trial finished and was evaluated, 1 otherwise, 2 bad input."""
     from rllib_asor.cli import manifest
-    from rllib_asor.cli.cluster import start_ray
+    from rllib_asor.cli.cluster import check_local_gpus, start_ray
     from rllib_asor.cli.experiment import required_cpus
     from rllib_asor.registry import env_names
 
@@ -358,6 +358,8 @@ def run(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise UsageError(f"{args.episodes} is invalid: allowed an integer >= 1", key="--episodes")
     named = prepared_arms(args)
+    for _, e, c in named:
+        check_local_gpus(e, c)  # `rllib ab` trains on a local Ray
     check = arm_check(named, vs=bool(args.vs))
     trainable = trainable_for(named, args.file)
     exp = named[-1][1]

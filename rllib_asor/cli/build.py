@@ -348,6 +348,17 @@ def required_cpus(algo_config: Any) -> float:
     return trial + offline_data_cpus(algo_config)
 
 
+def required_gpus(algo_config: Any) -> float:
+    """GPUs one trial asks Ray for: its Learners' (`num_gpus_per_learner`, the local Learner
+    with `num_learners: 0`) and its env runners' (`num_gpus_per_env_runner`)."""
+    c = algo_config
+    try:
+        return float(c.algo_class.default_resource_request(c).required_resources.get("GPU", 0))
+    except Exception:
+        learners = max(c.num_learners, 1) * (c.num_gpus_per_learner or 0)
+        return learners + c.num_env_runners * (c.num_gpus_per_env_runner or 0)
+
+
 def offline_data_cpus(algo_config: Any) -> float:
     """CPUs an offline run's Ray Data pipeline takes outside the trial's own reservation:
     a read task (1) and RLlib's `OfflinePreLearner` actors (`map_batches_kwargs` concurrency,

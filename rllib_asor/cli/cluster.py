@@ -5,8 +5,12 @@ from __future__ import annotations
 import math
 import os
 import socket
+from typing import TYPE_CHECKING, Any
 
 from rllib_asor.cli.errors import UsageError
+
+if TYPE_CHECKING:
+    from rllib_asor.cli.spec import Experiment
 
 PROBE_TIMEOUT_S = 3.0
 DEFAULT_GCS_PORT = 6379
@@ -81,3 +85,26 @@ def start_ray(address: str | None, cpus_needed: float) -> bool:
     quiet.quiet_driver()  # again: ray.init may add handlers
     quiet.quiet_worker_lines()
     return True
+
+
+def check_local_gpus(exp: Experiment, algo_config: Any) -> None:
+    """UsageError when a trial asks for GPUs and torch sees none on this machine: a local Ray
+    would keep the trial waiting for them forever."""
+    from rllib_asor.cli.build import required_gpus
+    from rllib_asor.cli.overrides import cuda_available
+
+    needed = required_gpus(algo_config)
+    if needed > 0 and not cuda_available():
+        asked = ", ".join(
+            f"{key}: {exp.config[key]}"
+            for key in ("num_gpus_per_learner", "num_gpus_per_env_runner", "num_gpus")
+            if exp.config.get(key)
+        )
+        raise UsageError(
+            f"a trial asks for {needed:g} GPU(s) ({asked or 'the config'}) and torch sees no "
+            "CUDA device here, so Ray would wait for them forever; allowed on this machine: "
+            "num_gpus_per_learner: 0 (the Learner on the CPU), --test (which sets it to 0), "
+            "or --address of a Ray cluster with GPUs",
+            source=exp.source,
+            key=f"{exp.name}.config",
+        )

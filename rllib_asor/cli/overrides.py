@@ -86,7 +86,8 @@ def _number(raw: str) -> Any:
     return raw
 
 
-def _cuda_available() -> bool:
+def cuda_available() -> bool:
+    """Whether torch sees a CUDA device on this machine."""
     import torch
 
     return torch.cuda.is_available()
@@ -107,7 +108,10 @@ def apply_overrides(
         offline = cfg.get("input", "sampler") != "sampler"
         if offline:  # data from files: few dataset passes, the file's env runners (often 0)
             cfg["dataset_num_iters_per_learner"] = TEST_DATASET_ITERS
-            cfg["map_batches_kwargs"] = {**(cfg.get("map_batches_kwargs") or {}), **TEST_PRELEARNERS}
+            cfg["map_batches_kwargs"] = {
+                **(cfg.get("map_batches_kwargs") or {}),
+                **TEST_PRELEARNERS,
+            }
             tiny_test_data(exp)
         else:
             cfg["num_env_runners"] = TEST_ENV_RUNNERS
@@ -117,7 +121,7 @@ def apply_overrides(
             if family is not None and family.test_env_config:
                 cfg["env_config"] = {**(cfg.get("env_config") or {}), **family.test_env_config}
         cfg["num_learners"] = 0
-        if cfg.get("num_gpus_per_learner") and not _cuda_available():
+        if cfg.get("num_gpus_per_learner") and not cuda_available():
             exp.warnings.append(
                 f"{exp.source}: {exp.name}.config.num_gpus_per_learner: "
                 f"{cfg['num_gpus_per_learner']} -> 0 for --test (torch sees no CUDA device)"

@@ -128,6 +128,8 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
             "--resume continues a real run; allowed without --fresh and --test (smoke runs "
             "start over)"
         )
+    from rllib_asor.cli.cluster import check_local_gpus
+
     problems = Problems()
     exps = load_experiments(args, problems)
     configs = []
@@ -144,6 +146,8 @@ def train(args: argparse.Namespace) -> list[tuple[experiment.Experiment, Any]]:
                 keep_checkpoints=args.keep_checkpoints,
             )
             configs.append(experiment.validate(exp))
+            if not args.address and not getattr(args, "dry_run", False):
+                check_local_gpus(exp, configs[-1])  # a local Ray has this machine's GPUs only
     problems.raise_any()
     if getattr(args, "dry_run", False):
         from rllib_asor.cli.dry_run import print_experiments

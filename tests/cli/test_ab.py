@@ -177,3 +177,21 @@ def test_ab_bad_input_is_one_line(
     other = write_yaml(YAML.replace("MyVarPole-v0", "CartPole-v1"), "other.yaml")
     assert main(["ab", plain, "--seeds", "2", "--vs", other]) == 2
     assert "allowed: the same run and env (paired seeds)" in capsys.readouterr().err
+
+
+def test_ab_with_gpus_on_a_machine_without_one_is_one_line(
+    write_yaml: Callable[..., str],
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+) -> None:
+    monkeypatch.setattr("rllib_asor.cli.overrides.cuda_available", lambda: False)
+    gpu = write_yaml(
+        "x:\n  env: CartPole-v1\n  run: PPO\n  stop: {training_iteration: 1}\n"
+        "  config: {num_gpus_per_learner: 1, asor: {mode: asor}}\n"
+    )
+    argv = ["ab", gpu, "--seeds", "2", "--storage-path", str(tmp_path / "out")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "num_gpus_per_learner: 1" in err and "torch sees no CUDA device" in err
+    assert err.count("\n") == 1 and not (tmp_path / "out").exists()

@@ -240,3 +240,24 @@ def test_a_ppo_only_switch_on_another_algorithm_exits_2(write_yaml, capsys, key)
     rc, err = _run(capsys, ["train", "file", path])
     assert rc == 2
     _assert_one_line(err, f"x.config.learner_config_dict.{key}", "PPO only")
+
+
+@pytest.mark.parametrize(
+    ("config", "needed"),
+    [
+        ("{num_gpus_per_learner: 1}", "1 GPU(s) (num_gpus_per_learner: 1)"),
+        ("{num_env_runners: 2, num_gpus_per_env_runner: 0.5}",
+         "1 GPU(s) (num_gpus_per_env_runner: 0.5)"),
+    ],
+)  # fmt: skip
+def test_gpus_on_a_machine_without_one_exit_2_instead_of_waiting(
+    write_yaml, capsys, tmp_path, monkeypatch, config, needed
+):
+    monkeypatch.setattr("rllib_asor.cli.overrides.cuda_available", lambda: False)
+    path = write_yaml(GOOD_HEAD + f"  config: {config}\n")
+    rc, err = _run(capsys, ["train", "file", path, "--storage-path", str(tmp_path / "out")])
+    assert rc == 2
+    _assert_one_line(err, path, "x.config", needed, "torch sees no CUDA device",
+                     "allowed on this machine: num_gpus_per_learner: 0", "--test", "--address")  # fmt: skip
+    assert not (tmp_path / "out").exists()  # nothing started, nothing written
+    assert _run(capsys, ["train", "file", path, "--dry-run"])[0] == 0  # where it runs decides
