@@ -8,7 +8,6 @@ import copy
 
 import torch
 from ray.rllib.core import DEFAULT_MODULE_ID
-from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
 import game_env
@@ -32,14 +31,7 @@ def config(compiled: bool):
     return c.debugging(seed=3)
 
 
-def test_the_compiled_update_of_race_ppo_asor_equals_the_eager_one():
-    runner = SingleAgentEnvRunner(
-        config=race_ppo_config(max_episode_steps=20)
-        .env_runners(num_envs_per_env_runner=2)
-        .debugging(seed=3)
-    )
-    episodes = runner.sample(num_timesteps=64, random_actions=False)
-    runner.stop()
+def test_the_compiled_update_of_race_ppo_asor_equals_the_eager_one(race_episodes):
     weights, start = {}, None
     for compiled in (False, True):
         learner = config(compiled).build_learner(spaces=SPACES)
@@ -48,7 +40,7 @@ def test_the_compiled_update_of_race_ppo_asor_equals_the_eager_one():
             start = {n: p.detach().clone() for n, p in policy.named_parameters()}
         for _ in range(2):  # the second update runs the compiled graph without recompiling
             learner.update(
-                episodes=copy.deepcopy(episodes),
+                episodes=copy.deepcopy(race_episodes),
                 timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: 64},
                 num_epochs=2,
                 minibatch_size=32,

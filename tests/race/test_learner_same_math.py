@@ -9,7 +9,6 @@ import pytest
 import torch
 from ray.rllib.algorithms.ppo.torch.ppo_torch_learner import PPOTorchLearner
 from ray.rllib.core import DEFAULT_MODULE_ID, Columns
-from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 from ray.rllib.evaluation.postprocessing import Postprocessing
 from ray.rllib.utils.metrics import NUM_ENV_STEPS_SAMPLED_LIFETIME
 
@@ -156,24 +155,17 @@ def test_sync_free_ppo_loss_equals_rllibs_loss_metrics_and_gradients(use_kl_loss
 
 
 @pytest.mark.parametrize("grad_clip", [None, 0.05])
-def test_one_update_of_the_race_ppo_learner_equals_rllibs_ppo_learner(grad_clip):
+def test_one_update_of_the_race_ppo_learner_equals_rllibs_ppo_learner(grad_clip, race_episodes):
     """Same recorded episodes, same seeds: after one update (2 epochs × 2 minibatches, no
     shuffle) the race Learner (lean net path, sync-free loss, one gradient check, fused Adam)
     holds the weights RLlib's own PPOTorchLearner arrives at, and reports the same losses; with
     a `grad_clip` that binds, too (RLlib's gradient postprocessing then runs)."""
-    runner = SingleAgentEnvRunner(
-        config=race_ppo_config(max_episode_steps=20)
-        .env_runners(num_envs_per_env_runner=2)
-        .debugging(seed=3)
-    )
-    episodes = runner.sample(num_timesteps=64, random_actions=False)
-    runner.stop()
     results, weights = {}, {}
     for cls in (PPOTorchLearner, LeanPPOTorchLearner):
         lrn = learner(cls, grad_clip)
         assert type(lrn) is cls
         res = lrn.update(
-            episodes=copy.deepcopy(episodes),
+            episodes=copy.deepcopy(race_episodes),
             timesteps={NUM_ENV_STEPS_SAMPLED_LIFETIME: 64},
             num_epochs=2,
             minibatch_size=32,
