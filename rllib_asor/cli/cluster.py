@@ -103,7 +103,7 @@ def check_local_gpus(exp: Experiment, algo_config: Any) -> None:
         raise UsageError(
             f"a trial asks for {needed:g} GPU(s) ({asked or 'the config'}) and torch sees no "
             "CUDA device here, so Ray would wait for them forever; allowed on this machine: "
-            "num_gpus_per_learner: 0 (the Learner on the CPU), --test (which sets it to 0), "
+            "num_gpus_per_learner: 0 (the Learner on the CPU), --test (which sets them to 0), "
             "or --address of a Ray cluster with GPUs",
             source=exp.source,
             key=f"{exp.name}.config",

@@ -121,12 +121,13 @@ def apply_overrides(
             if family is not None and family.test_env_config:
                 cfg["env_config"] = {**(cfg.get("env_config") or {}), **family.test_env_config}
         cfg["num_learners"] = 0
-        if cfg.get("num_gpus_per_learner") and not cuda_available():
-            exp.warnings.append(
-                f"{exp.source}: {exp.name}.config.num_gpus_per_learner: "
-                f"{cfg['num_gpus_per_learner']} -> 0 for --test (torch sees no CUDA device)"
-            )
-            cfg["num_gpus_per_learner"] = 0
+        for key in ("num_gpus_per_learner", "num_gpus_per_env_runner"):
+            if cfg.get(key) and not cuda_available():
+                exp.warnings.append(
+                    f"{exp.source}: {exp.name}.config.{key}: "
+                    f"{cfg[key]} -> 0 for --test (torch sees no CUDA device)"
+                )
+                cfg[key] = 0
         cfg["evaluation_interval"] = None
         cfg.pop("train_batch_size_per_learner", None)
         cfg["train_batch_size"] = TEST_BATCH

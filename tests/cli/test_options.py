@@ -76,15 +76,20 @@ def test_test_mode_puts_a_gpu_learner_on_the_cpu_when_torch_sees_no_cuda(write_y
     with one warning naming the key (on a machine with CUDA the file's value stays)."""
     import torch
 
-    path = write_yaml("x:\n  env: CartPole-v1\n  run: PPO\n  config: {num_gpus_per_learner: 1}\n")
+    path = write_yaml(
+        "x:\n  env: CartPole-v1\n  run: PPO\n"
+        "  config: {num_gpus_per_learner: 1, num_gpus_per_env_runner: 0.5}\n"
+    )
     [exp] = experiment.load_file(path)
     experiment.apply_overrides(exp, test=True)
     if torch.cuda.is_available():
         assert exp.config["num_gpus_per_learner"] == 1 and not exp.warnings
         return
-    assert exp.config["num_gpus_per_learner"] == 0
+    assert exp.config["num_gpus_per_learner"] == exp.config["num_gpus_per_env_runner"] == 0
     assert any("num_gpus_per_learner: 1 -> 0 for --test" in w for w in exp.warnings)
-    assert experiment.validate(exp).num_gpus_per_learner == 0
+    assert any("num_gpus_per_env_runner: 0.5 -> 0 for --test" in w for w in exp.warnings)
+    config = experiment.validate(exp)
+    assert config.num_gpus_per_learner == config.num_gpus_per_env_runner == 0
 
 
 def test_num_env_runners_and_checkpoint_flags(write_yaml):
