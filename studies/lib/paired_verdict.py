@@ -1,7 +1,9 @@
 """A paired study's table and its fixed rule's verdict: each arm against one baseline, seed by
 seed, on one per-run metric, decided only once the arm and the baseline both have every planned
 seed. A study's summarise.py states its rule as a `PairedStudy` (studies/race_scale,
-race_scale_steps, race_scale_budget)."""
+race_scale_steps, race_scale_budget, race_scale_2m, race_scale_rollout_2m); the readings
+reported beside a rule, deciding nothing (declining runs, a descriptive paired difference),
+are the functions at the end."""
 
 from __future__ import annotations
 
