@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from studies.lib.common import round_floats
 from studies.lib.run_files import existing, read_run, run_file, write_run
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -175,8 +176,9 @@ def run_one(spec: dict[str, Any]) -> dict[str, Any]:
         "steps": steps,
         "train_wall_s": train_s,
         "eval": ev,
-        "curve": curve,
-        "trace": trace,
+        # per-iteration records that no rule reads at full precision: 6 significant digits
+        "curve": round_floats(curve),
+        "trace": round_floats(trace),
         **({"switched_at": switched_at} if switch is not None else {}),
     }
 
