@@ -122,14 +122,48 @@ class PairedStudy:
     margin: float = -0.10
     """'as good' iff the 95 % BCa interval's lower end is above this."""
     wall: str = "2-core machine, 2 runs at once"
+    declining: tuple[tuple[str, str], ...] = ()
+    """Read beside the rule: (study folder, "" for this one; method) whose runs' declining
+    seeds are listed (`declining_seeds`)."""
+    beside: tuple[str, str, str] | None = None
+    """Read beside the rule: (study folder, baseline, treatment): `treatment − baseline` over
+    their shared seeds (`descriptive_pair`), e.g. a method at 2M against itself at 500k."""
+    beside_at: str = "500k"
+    """What `beside`'s baseline is, in its line and summary key ("today-2m − today (500k)")."""
 
     def summarise(self, runs: Path) -> dict[str, Any]:
         """The study's summary from its runs folder (`pages` and `cli` call it)."""
-        folders = [runs.parent, *(runs.parent.parent / name for name in self.also)]
-        return summarise(folders, self.metric, self.baseline, self.arms, self.seeds, self.margin)
+        studies = runs.parent.parent
+        folders = [runs.parent, *(studies / name for name in self.also)]
+        res = summarise(folders, self.metric, self.baseline, self.arms, self.seeds, self.margin)
+        if self.declining:
+            res["declining"] = {
+                method: declining_seeds(studies / (folder or runs.parent.name) / "runs", method)
+                for folder, method in self.declining
+            }
+        if self.beside:
+            folder, baseline, treatment = self.beside
+            res[self._beside_key] = descriptive_pair(
+                [runs.parent, studies / folder], self.metric, baseline, treatment
+            )
+        return res
+
+    @property
+    def _beside_key(self) -> str:
+        """`beside`'s summary key: "today_2m_vs_500k" for treatment today-2m."""
+        assert self.beside is not None
+        return f"{self.beside[2].replace('-', '_')}_vs_{self.beside_at}"
 
     def table(self, res: dict[str, Any]) -> str:
-        return table(res, self.baseline, self.wall)
+        """The rule's table, then what `declining` and `beside` read beside it."""
+        lines = [table(res, self.baseline, self.wall)]
+        if self.declining:
+            lines += declining_table(res["declining"])
+        if self.beside:
+            _, baseline, treatment = self.beside
+            label = f"{treatment} − {baseline} ({self.beside_at})"
+            lines += ["", descriptive_line(res[self._beside_key], label)]
+        return "\n".join(lines) + ("\n" if len(lines) > 1 else "")
 
     def cli(self, default_folder: Path) -> None:
         """The study's `summarise.py` as a script: STUDY_DIR (argv[1], else `default_folder`)
